@@ -45,7 +45,8 @@ def to_tensor(x: Array, name: str, dtype: torch.dtype | None = None) -> tuple[to
     if x.dtype == object:
         raise ValueError(f"{name} must be a numeric array, got dtype object")
     out_dtype = x.dtype if np.issubdtype(x.dtype, np.floating) else np.dtype(np.float64)
-    t = torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64))
+    # np.array (not ascontiguousarray) keeps 0-dim arrays 0-dim.
+    t = torch.from_numpy(np.array(x, dtype=np.float64, order="C"))
     if dtype is not None:
         t = t.to(dtype)
 

@@ -672,15 +672,17 @@ def warp(
     u, v = uv[:, :1], uv[:, 1:]
     with torch.no_grad():
         valid = _valid(dd) & (z > _EPS_DEPTH) & (u >= 0) & (u <= Ws) & (v >= 0) & (v <= Hs)
-    # Park invalid coordinates at the image centre: keeps the grid finite and in range.
+    # Park invalid coordinates at (u, v) = (0, 0): keeps the grid finite and in range.
     grid = _uv_to_grid(torch.where(valid, uv, torch.zeros_like(uv)), Hs, Ws)
     warped = F.grid_sample(img, grid, mode="bilinear", padding_mode="border", align_corners=False)
 
     if ds is not None:
         with torch.no_grad():
-            inv = torch.where(_valid(ds), 1.0 / torch.where(_valid(ds), ds, torch.ones_like(ds)), torch.zeros_like(ds))
+            ok_s = _valid(ds)
+            inv = torch.where(ok_s, 1.0 / torch.where(ok_s, ds, torch.ones_like(ds)), torch.zeros_like(ds))
             inv_at = F.grid_sample(inv, grid.detach(), mode="bilinear", padding_mode="border", align_corners=False)
-            d_at = torch.where(inv_at > 0, 1.0 / inv_at.clamp_min(1e-300), torch.zeros_like(inv_at))
+            tiny = torch.finfo(inv_at.dtype).tiny
+            d_at = torch.where(inv_at > 0, 1.0 / inv_at.clamp_min(tiny), torch.zeros_like(inv_at))
             valid = valid & ((z.detach() - d_at).abs() <= rel_tol * z.detach())
 
     warped = torch.where(valid, warped, torch.zeros_like(warped))

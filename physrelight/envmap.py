@@ -145,8 +145,10 @@ def _solid_angles(height: int, width: int) -> np.ndarray:
     # of its hat function, dphi * int hat_i(theta) sin(theta) dtheta, in closed form.
     dt = np.pi / (height - 1)
     theta = dt * np.arange(height)
-    band = np.sin(theta) * 2 * (1 - np.cos(dt)) / dt
-    band[0] = band[-1] = 1 - np.sin(dt) / dt
+    band = np.sin(theta) * 4 * np.sin(dt / 2) ** 2 / dt  # 2 (1 - cos dt) / dt, without cancellation
+    # 1 - sin(dt)/dt by its Taylor series where the closed form cancels.
+    pole = 1 - np.sin(dt) / dt if dt > 0.1 else dt**2 / 6 - dt**4 / 120 + dt**6 / 5040 - dt**8 / 362880
+    band[0] = band[-1] = pole
     out = np.repeat((band * 2 * np.pi / width)[:, None], width, axis=1)
     out.setflags(write=False)
     return out

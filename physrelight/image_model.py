@@ -143,6 +143,8 @@ def solve_lighting(image: Array, albedo: Array, normals: Array, mask: Array, sha
 
     Returns:
         ``(B, K, 3)`` radiance SH, or ``(K, 3)`` for an unbatched ``(3, H, W)`` image.
+        Bands with ``A_l = 0`` (l = 3, 5, ...) leave no trace in a Lambertian image;
+        they come back as 0 (the minimum-norm solution).
 
     Raises:
         ValueError: shapes disagree, the mask holds fewer usable pixels than

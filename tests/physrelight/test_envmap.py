@@ -1,0 +1,174 @@
+"""Specification of physrelight.envmap: layout, IO, brute-force irradiance, rotation, sun split."""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pytest
+import torch
+
+from physrelight import envmap, rotations, sh
+
+from .conftest import HDRI_DIR, HDRI_NAMES
+
+
+def test_01_layout_follows_mitsubas_latlong_convention() -> None:
+    h, w = 8, 16
+    d = envmap.directions(h, w)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0, atol=1e-15)
+    np.testing.assert_allclose(d[0], np.broadcast_to([0, 1, 0], (w, 3)), atol=1e-15)  # row 0 = zenith
+    np.testing.assert_allclose(d[-1], np.broadcast_to([0, -1, 0], (w, 3)), atol=1e-15)
+    # Rows align-corners in theta, columns texel-centred in u = atan2(x, -z) / 2 pi.
+    np.testing.assert_allclose(np.arccos(d[:, 0, 1]), np.pi * np.arange(h) / (h - 1), atol=1e-12)
+    u = np.mod(np.arctan2(d[3, :, 0], -d[3, :, 2]) / (2 * np.pi), 1.0)
+    np.testing.assert_allclose(u, (np.arange(w) + 0.5) / w, atol=1e-12)
+
+
+def test_02_solid_angles_sum_to_4pi_and_integrate_the_interpolant() -> None:
+    for h in (2, 3, 16, 513):
+        assert abs(envmap.solid_angles(h, 2 * h).sum() - 4 * math.pi) < 1e-12
+    # A map that is cos(theta) in the upper half-space: int = pi exactly for the
+    # interpolated function up to O(dt^2).
+    h = 256
+    d = envmap.directions(h, 2 * h)
+    env = np.repeat(np.clip(d[..., 1:2], 0, None), 3, axis=-1)
+    total = (env[..., 0] * envmap.solid_angles(h, 2 * h)).sum()
+    assert abs(total - math.pi) < 1e-4
+
+
+def test_03_exr_round_trip_is_bit_exact_and_atomic(tmp_path) -> None:
+    rng = np.random.default_rng(0)
+    img = (rng.random((12, 24, 3)) * 100).astype(np.float32)
+    path = tmp_path / "sub" / "map.exr"
+    envmap.write(path, img)
+    back = envmap.read(path)
+    assert back.dtype == np.float32
+    np.testing.assert_array_equal(back, img)
+    assert os.listdir(path.parent) == ["map.exr"]  # no temporary file left behind
+
+
+def test_04_reading_clamps_dwa_noise_and_rejects_broken_files(tmp_path) -> None:
+    forest = envmap.read(HDRI_DIR / "forest.exr")  # holds -2e-3 DWA ringing on disk
+    assert forest.min() >= 0.0 and forest.shape == (512, 1024, 3)
+    with pytest.raises(ValueError, match="does not exist"):
+        envmap.read(tmp_path / "missing.exr")
+    junk = tmp_path / "junk.exr"
+    junk.write_bytes(b"not an exr at all")
+    with pytest.raises(ValueError, match="cannot read"):
+        envmap.read(junk)
+    with pytest.raises(ValueError, match="non-finite"):
+        envmap.write(tmp_path / "nan.exr", np.full((4, 8, 3), np.nan, dtype=np.float32))
+    with pytest.raises(ValueError, match=r"\(H, W, 3\)"):
+        envmap.write(tmp_path / "grey.exr", np.ones((4, 8), dtype=np.float32))
+
+
+def test_05_sample_returns_texels_at_their_centres_and_is_continuous_across_the_seam() -> None:
+    rng = np.random.default_rng(1)
+    env = rng.random((16, 32, 3))
+    d = envmap.directions(16, 32)
+    np.testing.assert_allclose(envmap.sample(env, d[1:-1]), env[1:-1], atol=1e-12)
+    # u = 0 lies half-way between the last and the first column.
+    theta = np.pi * 7.5 / 15
+    on_seam = np.array([0.0, math.cos(theta), -math.sin(theta)])
+    expected = 0.25 * (env[7, -1] + env[7, 0] + env[8, -1] + env[8, 0])
+    np.testing.assert_allclose(envmap.sample(env, on_seam), expected, atol=1e-12)
+
+
+def test_06_brute_force_irradiance_of_analytic_skies() -> None:
+    h = 512
+    const = np.full((h, 2 * h, 3), 2.0)
+    d = envmap.directions(h, 2 * h)
+    upper = np.where(d[..., 1:2] > 0, 1.0, 0.0) * np.ones(3)
+    n = np.array([[0, 1, 0], [0, -1, 0], [1, 0, 0], [0, 0, 1]], dtype=float)
+    # Uniform L: E = pi L for every normal. Upper hemisphere only: pi, 0, pi/2, pi/2.
+    np.testing.assert_allclose(envmap.irradiance_reference(const, n), 2 * math.pi, rtol=2e-5)
+    e = envmap.irradiance_reference(upper, n)[:, 0]
+    np.testing.assert_allclose(e, [math.pi, 0.0, math.pi / 2, math.pi / 2], atol=2e-2)
+    # Chunking does not change the result.
+    np.testing.assert_allclose(envmap.irradiance_reference(upper, n, chunk_texels=1000),
+                               envmap.irradiance_reference(upper, n), rtol=1e-12)
+
+
+def test_07_rotated_map_has_rotated_sh() -> None:
+    # Smooth map (order-4 band-limited plus a soft lobe): bilinear resampling error only.
+    h = 256
+    d = envmap.directions(h, 2 * h)
+    lobe = np.exp(8 * (d @ np.array([0.6, 0.64, 0.48]) - 1))[..., None] * np.array([3.0, 2.0, 1.0])
+    env = 0.2 + lobe
+    R = rotations.random_rotation(5)
+    got = sh.project_envmap(envmap.rotate(env, R), 4)
+    want = sh.rotate(sh.project_envmap(env, 4), R)
+    assert np.abs(got - want).max() < 2e-3 * np.abs(want).max()
+    # The direction of the lobe's peak moves to R times it.
+    peak = np.unravel_index(np.argmax(envmap.rotate(env, R)[..., 0]), (h, 2 * h))
+    moved = R @ np.array([0.6, 0.64, 0.48])
+    assert math.degrees(math.acos(np.clip(d[peak] @ moved, -1, 1))) < 1.0
+
+
+def test_08_sun_split_recovers_a_synthetic_sun_and_conserves_energy() -> None:
+    h = 512
+    d = envmap.directions(h, 2 * h)
+    w = envmap.solid_angles(h, 2 * h)
+    sky = 0.3 + 0.5 * np.clip(d[..., 1:2], 0, None) * np.array([0.6, 0.8, 1.0])
+    s = np.array([-0.5, 0.5, 0.7071])
+    s /= np.linalg.norm(s)
+    disk = (d @ s) >= math.cos(math.radians(0.8))
+    e_sun = np.array([300.0, 280.0, 250.0])
+    env = sky.copy()
+    env[disk] += e_sun / w[disk].sum()
+    split = envmap.split_sun(env)
+    assert split.has_sun
+    assert math.degrees(math.acos(np.clip(split.direction @ s, -1, 1))) < 0.3
+    np.testing.assert_allclose(split.irradiance, e_sun, rtol=0.01)
+    # Exact energy bookkeeping: sky + sun integrates to the original.
+    total = (env * w[..., None]).sum(axis=(0, 1))
+    np.testing.assert_allclose((split.sky * w[..., None]).sum(axis=(0, 1)) + split.irradiance, total, rtol=1e-6)
+    np.testing.assert_allclose(split.sky[disk], sky[disk], rtol=0.02)
+
+
+@pytest.mark.parametrize("name", HDRI_NAMES)
+def test_09_sun_split_of_real_maps_keeps_irradiance(hdris, name: str) -> None:
+    env = hdris[name]
+    split = envmap.split_sun(env)
+    assert split.has_sun == (name != "courtyard")  # the courtyard is overcast
+    n = sh.fibonacci_sphere(200)
+    direct = 0 if not split.has_sun else np.clip(n @ split.direction, 0, None)[:, None] * split.irradiance
+    recombined = envmap.irradiance_reference(split.sky, n) + direct
+    err = np.abs((recombined - envmap.irradiance_reference(env, n)) @ envmap.LUMINANCE).max()
+    # Moving the solar region (radius 3 deg) onto one direction changes E by at most
+    # (1 - cos 3deg) of the sun's share plus terminator effects: < 0.5 % of int L.
+    assert err / envmap.luminance_integral(env) < 5e-3
+
+
+def test_10_city_sun_is_where_the_map_is_brightest(hdris) -> None:
+    env = hdris["city"]
+    split = envmap.split_sun(env)
+    y = env @ np.asarray(envmap.LUMINANCE)
+    peak = envmap.directions(*y.shape)[np.unravel_index(np.argmax(y), y.shape)]
+    assert math.degrees(math.acos(np.clip(split.direction @ peak, -1, 1))) < 0.5
+    assert 0.1 < split.fraction < 0.5 and split.direction[1] > 0  # above the horizon
+
+
+def test_11_torch_in_torch_out() -> None:
+    env = torch.rand(8, 16, 3, dtype=torch.float64)
+    out = envmap.irradiance_reference(env, torch.tensor([[0.0, 1.0, 0.0]], dtype=torch.float32))
+    assert isinstance(out, torch.Tensor) and out.dtype == torch.float32
+    assert isinstance(envmap.rotate(env, torch.eye(3, dtype=torch.float64)), torch.Tensor)
+
+
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda: envmap.irradiance_reference(np.ones((8, 8, 3)), np.ones((2, 3))), "2:1"),
+        (lambda: envmap.irradiance_reference(np.ones((8, 16, 3)), np.zeros((2, 3))), "zero-length"),
+        (lambda: envmap.irradiance_reference(np.ones((8, 16, 3)), np.ones((2, 2))), r"\(N, 3\)"),
+        (lambda: envmap.rotate(np.ones((8, 16, 3)), np.ones((3, 3))), "orthonormal"),
+        (lambda: envmap.split_sun(np.full((8, 16, 3), np.nan)), "non-finite"),
+        (lambda: envmap.directions(8, 15), "W == 2 H"),
+    ],
+)
+def test_12_bad_input_raises_a_clear_value_error(call, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        call()
