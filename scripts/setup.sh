@@ -29,7 +29,15 @@ fi
 
 if [ ! -x "$VENV/bin/python" ]; then
     echo "[setup] creating virtual environment $VENV"
-    "$PY" -m venv "$VENV"
+    if ! "$PY" -m venv "$VENV" 2>/dev/null; then
+        # Debian's system Python ships venv separately.
+        rm -rf "$VENV"
+        SUDO=""
+        [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+        $SUDO apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-venv >/dev/null
+        "$PY" -m venv "$VENV"
+    fi
 fi
 
 stamp="$VENV/.physrelight-setup"

@@ -1,0 +1,105 @@
+"""Image and JSON IO at the library's boundary, with atomic writes.
+
+Inside the library images are linear torch ``(B, C, H, W)``; files hold numpy
+``(H, W, C)``. PNG/JPEG are display-referred (sRGB-encoded 8 bit); HDR data goes to EXR
+through :mod:`physrelight.envmap`. Every write goes to a temporary file in the target
+folder and is renamed into place, so a killed process never leaves half a file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from physrelight._checks import Array, to_tensor
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` if the block succeeds."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=suffix or p.suffix, dir=p.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, p)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """Read a PNG/JPEG photo as float32 ``(H, W, 3)`` display values in [0, 1] (sRGB-encoded).
+
+    Linearise with :func:`physrelight.colour.from_ldr`. Grey-scale, palette and RGBA
+    images are rejected with a ``ValueError`` naming the mode, rather than guessed at.
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"image {str(p)!r} does not exist")
+    try:
+        with Image.open(p) as im:
+            im.load()
+            mode = im.mode
+            if mode == "RGBA":
+                im = im.convert("RGB")
+            elif mode != "RGB":
+                raise ValueError(f"{str(p)!r} is a {mode!r} image; an RGB colour photo is needed")
+            arr = np.asarray(im)
+    except (UnidentifiedImageError, OSError) as err:
+        raise ValueError(f"cannot read {str(p)!r} as an image: {err}") from None
+    return arr.astype(np.float32) / 255.0
+
+
+def write_png(path: str | os.PathLike, image: Array) -> None:
+    """Write display values ``(H, W, 3)`` or ``(H, W)`` in [0, 1] as an 8-bit PNG (rounded, clipped)."""
+    from PIL import Image
+
+    t, _ = to_tensor(image, "image")
+    arr = t.detach().cpu().numpy()
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[-1] not in (1, 3, 4)):
+        raise ValueError(f"image must have shape (H, W), (H, W, 3) or (H, W, 4), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("image holds NaN or inf")
+    if arr.ndim == 3 and arr.shape[-1] == 1:
+        arr = arr[..., 0]
+    u8 = np.clip(np.round(arr * 255.0), 0, 255).astype(np.uint8)
+    with atomic_path(path, ".png") as tmp:
+        Image.fromarray(u8).save(tmp, format="PNG")
+
+
+def write_json(path: str | os.PathLike, data: Any) -> None:
+    """Write JSON (sorted keys, 2-space indent) atomically; numpy scalars/arrays are converted."""
+
+    def default(o: Any) -> Any:
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, np.generic):
+            return o.item()
+        if isinstance(o, Path):
+            return str(o)
+        raise TypeError(f"cannot serialise {type(o).__name__} to JSON")
+
+    text = json.dumps(data, indent=2, sort_keys=True, default=default) + "\n"
+    with atomic_path(path, ".json") as tmp:
+        tmp.write_text(text)
+
+
+def read_json(path: str | os.PathLike) -> Any:
+    """Read a JSON file, with a ``ValueError`` naming the file when it is missing or broken."""
+    p = Path(path)
+    try:
+        return json.loads(p.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{str(p)!r} does not exist") from None
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{str(p)!r} is not valid JSON: {err}") from None
