@@ -23,13 +23,12 @@ from __future__ import annotations
 import functools
 import math
 import os
-import tempfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import torch
 
+from physrelight import io
 from physrelight._checks import (
     Array,
     check_finite,
@@ -69,50 +68,23 @@ def read(path: str | os.PathLike) -> np.ndarray:
     The alpha channel, if any, is dropped. Slightly negative values from lossy (DWA)
     compression are clamped to 0; NaN/inf or strongly negative values raise.
     """
-    import OpenEXR  # imported here: reading is rare and the module is heavy
-
-    p = Path(path)
-    if not p.is_file():
-        raise ValueError(f"environment map {str(p)!r} does not exist")
-    try:
-        channels = OpenEXR.File(str(p), separate_channels=True).channels()
-    except Exception as err:  # OpenEXR raises bare exceptions with C++ messages
-        raise ValueError(f"cannot read {str(p)!r} as EXR: {err}") from None
-    names = {k.split(".")[-1].upper(): k for k in channels}
-    if not {"R", "G", "B"} <= set(names):
-        raise ValueError(f"{str(p)!r} must have R, G, B channels, found {sorted(channels)}")
-    rgb = np.stack([np.asarray(channels[names[c]].pixels, dtype=np.float32) for c in "RGB"], axis=-1)
+    rgb = io.read_exr(path)
+    if rgb.ndim != 3:
+        raise ValueError(f"{str(path)!r} must have R, G, B channels, found a single channel")
     if not np.all(np.isfinite(rgb)):
-        raise ValueError(f"{str(p)!r} holds non-finite values (NaN or inf)")
+        raise ValueError(f"{str(path)!r} holds non-finite values (NaN or inf)")
     if rgb.size and rgb.min() < -DWA_NEGATIVE_TOLERANCE * max(1.0, float(np.percentile(rgb, 99.9))):
-        raise ValueError(f"{str(p)!r} holds strongly negative radiance (min {rgb.min():.4g})")
+        raise ValueError(f"{str(path)!r} holds strongly negative radiance (min {rgb.min():.4g})")
     return np.clip(rgb, 0.0, None)
 
 
 def write(path: str | os.PathLike, image: Array) -> None:
-    """Write a linear ``(H, W, 3)`` image as a float32, ZIP-compressed (lossless) RGB EXR.
-
-    The write is atomic: the file appears complete or not at all.
-    """
-    import OpenEXR
-
+    """Write a linear ``(H, W, 3)`` image as a float32, ZIP-compressed (lossless) RGB EXR, atomically."""
     t, _ = to_tensor(image, "image")
     if t.ndim != 3 or t.shape[-1] != 3:
         raise ValueError(f"image must have shape (H, W, 3), got {tuple(t.shape)}")
     check_finite(t, "image")
-    arr = np.ascontiguousarray(t.detach().cpu().numpy().astype(np.float32))
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    fd, tmp = tempfile.mkstemp(suffix=".exr", dir=p.parent, prefix=f".{p.name}.")
-    os.close(fd)
-    try:
-        with OpenEXR.File(header, {"RGB": arr}) as f:
-            f.write(tmp)
-        os.replace(tmp, p)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    io.write_exr(path, t)
 
 
 # ---------------------------------------------------------------- geometry

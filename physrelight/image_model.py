@@ -50,9 +50,9 @@ def _shading_basis(n: torch.Tensor, order: int) -> torch.Tensor:
     # Replace missing normals by +z so the basis is defined, then zero those pixels.
     safe = torch.where(valid, n, torch.tensor([0.0, 0.0, 1.0], dtype=n.dtype, device=n.device)[None, :, None, None])
     safe = safe / torch.linalg.vector_norm(safe, dim=1, keepdim=True)
-    y = sh._basis_xyz(safe[:, 0], safe[:, 1], safe[:, 2], order)  # (B, H, W, K)
+    y = sh._basis_xyz(safe[:, 0], safe[:, 1], safe[:, 2], order, dim=1)  # (B, K, H, W)
     a = sh.irradiance_transfer(order, n.dtype).to(n.device) / math.pi
-    return (y * a).permute(0, 3, 1, 2) * valid
+    return y * (a[None, :, None, None] * valid)
 
 
 def shading(normals: Array, lighting: Array) -> Array:

@@ -35,6 +35,51 @@ def atomic_path(path: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
             os.remove(tmp)
 
 
+def write_exr(path: str | os.PathLike, image: Array) -> None:
+    """Write a float image as a lossless (ZIP) float32 EXR, atomically.
+
+    ``(H, W, 3)`` is stored as RGB, ``(H, W)`` as a single channel ``Y``.
+    """
+    import OpenEXR
+
+    t, _ = to_tensor(image, "image")
+    arr = np.ascontiguousarray(t.detach().cpu().numpy().astype(np.float32))
+    if arr.ndim == 3 and arr.shape[-1] == 3:
+        channels = {"RGB": arr}
+    elif arr.ndim == 2:
+        channels = {"Y": arr}
+    else:
+        raise ValueError(f"image must have shape (H, W, 3) or (H, W), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("image holds non-finite values (NaN or inf)")
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_path(path, ".exr") as tmp:
+        with OpenEXR.File(header, channels) as f:
+            f.write(str(tmp))
+
+
+def read_exr(path: str | os.PathLike) -> np.ndarray:
+    """Read an EXR as float32: ``(H, W, 3)`` for R, G, B (alpha dropped), ``(H, W)`` for one channel.
+
+    Raises ``ValueError`` naming the file when it is missing, unreadable, or holds other channels.
+    """
+    import OpenEXR
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{str(p)!r} does not exist")
+    try:
+        channels = OpenEXR.File(str(p), separate_channels=True).channels()
+    except Exception as err:  # OpenEXR raises bare exceptions with C++ messages
+        raise ValueError(f"cannot read {str(p)!r} as EXR: {err}") from None
+    names = {k.split(".")[-1].upper(): k for k in channels}
+    if {"R", "G", "B"} <= set(names):
+        return np.stack([np.asarray(channels[names[c]].pixels, dtype=np.float32) for c in "RGB"], axis=-1)
+    if len(channels) == 1:
+        return np.asarray(next(iter(channels.values())).pixels, dtype=np.float32)
+    raise ValueError(f"{str(p)!r} must have R, G, B channels or a single channel, found {sorted(channels)}")
+
+
 def read_image(path: str | os.PathLike) -> np.ndarray:
     """Read a PNG/JPEG photo as float32 ``(H, W, 3)`` display values in [0, 1] (sRGB-encoded).
 

@@ -73,8 +73,9 @@ def _normalisation(l: int, m: int) -> float:
     return math.sqrt((2 * l + 1) / (4 * math.pi) * math.factorial(l - m) / math.factorial(l + m))
 
 
-def _basis_xyz(x: torch.Tensor, y: torch.Tensor, z: torch.Tensor, order: int) -> torch.Tensor:
-    """Real SH of unit directions given by components, ``(...)`` each -> ``(..., K)``.
+def _basis_xyz(x: torch.Tensor, y: torch.Tensor, z: torch.Tensor, order: int, dim: int = -1) -> torch.Tensor:
+    """Real SH of unit directions given by components, ``(...)`` each -> ``(..., K)``
+    (the coefficient axis inserted at ``dim``).
 
     Uses the associated Legendre recurrence on ``P_l^m(z) / sin^m(theta)`` (a polynomial
     in z) times ``Re/Im (x + i y)^m`` (= ``sin^m cos/sin(m phi)``), so it is polynomial in
@@ -107,7 +108,7 @@ def _basis_xyz(x: torch.Tensor, y: torch.Tensor, z: torch.Tensor, order: int) ->
             else:
                 out[l * (l + 1) + m] = math.sqrt(2.0) * k * p * cm[m]
                 out[l * (l + 1) - m] = math.sqrt(2.0) * k * p * sm[m]
-    return torch.stack(out, dim=-1)  # type: ignore[arg-type]
+    return torch.stack(out, dim=dim)  # type: ignore[arg-type]
 
 
 def basis(dirs: Array, order: int = 2) -> Array:
