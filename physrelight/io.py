@@ -105,6 +105,21 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     return arr.astype(np.float32) / 255.0
 
 
+def read_mask(path: str | os.PathLike) -> np.ndarray:
+    """Read a mask PNG (grey or RGB; any non-zero is on) as bool ``(H, W)``."""
+    from PIL import Image, UnidentifiedImageError
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"mask {str(p)!r} does not exist")
+    try:
+        with Image.open(p) as im:
+            arr = np.asarray(im.convert("L"))
+    except (UnidentifiedImageError, OSError) as err:
+        raise ValueError(f"cannot read {str(p)!r} as an image: {err}") from None
+    return arr >= 128
+
+
 def write_png(path: str | os.PathLike, image: Array) -> None:
     """Write display values ``(H, W, 3)`` or ``(H, W)`` in [0, 1] as an 8-bit PNG (rounded, clipped)."""
     from PIL import Image

@@ -41,7 +41,8 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 
 stamp="$VENV/.physrelight-setup"
-want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+# The editable install records the top-level packages it found: re-run when they change.
+want=$( (cat pyproject.toml; ls -d -- */__init__.py 2>/dev/null) | sha256sum | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
     echo "[setup] installing torch==2.13.0 (CPU build) and physrelight[all]"
     "$VENV/bin/python" -m pip install -q --upgrade pip

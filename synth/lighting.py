@@ -665,7 +665,7 @@ def evening(seed: int | np.random.Generator, elevation_deg: float | None = None,
 
 
 def hdri(path: str | os.PathLike, azimuth_deg: float = 0.0, split_sun: bool = True,
-         scale: float = 1.0) -> Lighting:
+         scale: float = 1.0, resolution: int | None = None) -> Lighting:
     """A real environment map, turned about +Y so every feature's azimuth grows by ``azimuth_deg``.
 
     The map keeps its own resolution. With ``split_sun`` (default) the sun is split off
@@ -680,6 +680,9 @@ def hdri(path: str | os.PathLike, azimuth_deg: float = 0.0, split_sun: bool = Tr
             column shift).
         split_sun: split the sun into a directional light.
         scale: radiance multiplier.
+        resolution: if given and below the map's height, the sky (after the sun split)
+            is downsampled to this height with :func:`physrelight.envmap.downsample`
+            (integral kept); the record and the render both use the downsampled sky.
     """
     p = Path(path)
     if not p.is_file():
@@ -710,7 +713,11 @@ def hdri(path: str | os.PathLike, azimuth_deg: float = 0.0, split_sun: bool = Tr
             elevation, azimuth = angles_from_direction(sun_direction)
             params.update(sun_elevation_deg=elevation, sun_azimuth_deg=azimuth, sun_fraction=float(part.fraction))
     params["sun_emitter"] = "directional" if sun_direction is not None else "none"
-    sky = np.clip(np.asarray(sky, dtype=np.float64), 0.0, None).astype(np.float32)
+    sky = np.clip(np.asarray(sky, dtype=np.float64), 0.0, None)
+    if resolution is not None and _check_resolution(resolution) < sky.shape[0]:
+        sky = np.clip(_envmap.downsample(sky, int(resolution)), 0.0, None)
+        params["resolution"] = int(resolution)
+    sky = sky.astype(np.float32)
     params.update(_exposure(sky, sun_direction, e_sun))
     return Lighting(kind="hdri", params=params, sky=sky, sun_direction=sun_direction,
                     sun_irradiance=e_sun, sun_radius_deg=SUN_RADIUS_DEG)
@@ -748,7 +755,7 @@ def sample_lighting(kind: str, seed: int | np.random.Generator, hdri_dir: str | 
 
     For ``hdri``, a map is drawn uniformly from :func:`list_hdris` (``hdri_dir`` or the
     shipped maps; indoor ones only with ``include_indoor``) and turned by an azimuth
-    uniform in [0, 360); HDRIs keep their own resolution. Other kinds use ``resolution``.
+    uniform in [0, 360), and its sky downsampled to ``resolution`` (integral kept).
     """
     _check_kind(kind)
     rng = _rng(seed)
@@ -760,4 +767,4 @@ def sample_lighting(kind: str, seed: int | np.random.Generator, hdri_dir: str | 
         return evening(rng, resolution=resolution)
     maps = list_hdris(hdri_dir, include_indoor)
     pick = int(rng.integers(len(maps)))
-    return hdri(maps[pick], azimuth_deg=float(rng.uniform(0.0, 360.0)))
+    return hdri(maps[pick], azimuth_deg=float(rng.uniform(0.0, 360.0)), resolution=resolution)

@@ -1,0 +1,231 @@
+"""Write a multi-view x multi-illumination synthetic dataset (the MegaDepth analogue).
+
+Layout (format ``physrelight-synth``, version 1)::
+
+    OUT/manifest.json                  format, version, the generating configuration
+    OUT/scene_0000/scene.json          seed, landmark description, cameras, lightings
+                                       (kind, parameters, sun, radiance SH orders 2 and 4
+                                       in the world frame and in every camera's frame),
+                                       photo parameters per view and lighting
+    OUT/scene_0000/timing.json         seconds per phase (the only non-deterministic file)
+    OUT/scene_0000/lights/light_YY/    env.exr (sky without the sun, world frame) + lighting.json
+    OUT/scene_0000/view_XX/            albedo.exr, normal.exr (camera frame), depth.exr,
+                                       sky_mask.png (255 = sky), mvs_depth.exr (0 = missing)
+    OUT/scene_0000/view_XX/light_YY/   radiance.exr (path traced), shadow.exr,
+                                       direct_shadow.exr, photo.png (the training input)
+
+``shadow.exr`` is the visibility of the rendered (delta) sun averaged over the pixel when
+the lighting has a sun, and the direct-light shadow ratio ``int V L cos / int L cos``
+otherwise; ``direct_shadow.exr`` is the latter for every lighting.
+
+A scene is rendered into ``OUT/.scene_0000.partial`` and renamed when complete, so a
+killed run loses at most the scene in progress and never leaves a half-written scene
+looking finished; a restarted run skips finished scenes. The same configuration gives the
+same bytes in every file but ``timing.json``. Shards (``i/n``) take scenes ``i, i+n, ...``
+so several machines can render one dataset into one folder.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from physrelight import io
+
+FORMAT = "physrelight-synth"
+VERSION = 1
+KINDS = ("sunsky", "evening", "overcast", "hdri")
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """Everything that determines a dataset's bytes."""
+
+    scenes: int = 4
+    views: int = 4
+    lights: int = 3
+    res: int = 128
+    spp: int = 64
+    seed: int = 0
+    max_depth: int = 8
+    gbuffer_spp: int = 16
+    shadow_spp: int = 16
+    env_resolution: int = 128
+    kinds: tuple[str, ...] = KINDS
+    hdri_dir: str | None = None
+    glossy_fraction: float = 0.0
+    trees: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("scenes", "views", "lights", "res", "spp", "max_depth", "gbuffer_spp", "shadow_spp"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if self.res < 16:
+            raise ValueError(f"res must be at least 16 pixels, got {self.res}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be non-negative, got {self.seed}")
+        if not self.kinds or any(k not in KINDS for k in self.kinds):
+            raise ValueError(f"kinds must be a non-empty subset of {KINDS}, got {self.kinds}")
+        if not 0.0 <= self.glossy_fraction <= 1.0:
+            raise ValueError(f"glossy_fraction must lie in [0, 1], got {self.glossy_fraction}")
+        if self.hdri_dir is not None and not Path(self.hdri_dir).is_dir():
+            raise ValueError(f"HDRI folder {self.hdri_dir!r} does not exist")
+
+    def to_json(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["kinds"] = list(self.kinds)
+        return d
+
+
+def scene_name(index: int) -> str:
+    return f"scene_{index:04d}"
+
+
+def _seed(*keys: int) -> int:
+    """A 32-bit seed derived from integers (stable across runs and platforms)."""
+    return int(np.random.SeedSequence([int(k) for k in keys]).generate_state(1)[0])
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"i/n"`` -> ``(i, n)`` with ``0 <= i < n``."""
+    try:
+        i, n = (int(p) for p in text.split("/"))
+    except ValueError:
+        raise ValueError(f"shard must look like i/n (e.g. 0/4), got {text!r}") from None
+    if not 0 <= i < n:
+        raise ValueError(f"shard i/n needs 0 <= i < n, got {text!r}")
+    return i, n
+
+
+def shard_scenes(config: SynthConfig, shard: tuple[int, int] = (0, 1)) -> list[int]:
+    i, n = shard
+    return list(range(i, config.scenes, n))
+
+
+def _check_manifest(out: Path, config: SynthConfig) -> None:
+    """Create the manifest, or refuse to mix configurations in one folder."""
+    path = out / "manifest.json"
+    want = {"format": FORMAT, "version": VERSION, "config": config.to_json()}
+    if path.exists():
+        have = io.read_json(path)
+        if have.get("format") != FORMAT or have.get("version") != VERSION:
+            raise ValueError(f"{str(out)!r} holds a {have.get('format')!r} v{have.get('version')} folder, "
+                             f"not {FORMAT} v{VERSION}")
+        if have.get("config") != want["config"]:
+            diff = sorted(k for k in want["config"] if have.get("config", {}).get(k) != want["config"][k])
+            raise ValueError(f"{str(out)!r} was made with different arguments ({', '.join(diff)}); "
+                             "use another folder or the same arguments")
+        return
+    io.write_json(path, want)
+
+
+def write_dataset(out: str | Path, config: SynthConfig, shard: tuple[int, int] = (0, 1),
+                  progress: bool = True) -> dict:
+    """Render the dataset's scenes of ``shard`` into ``out`` (resumable).
+
+    Returns:
+        ``{"rendered": [...], "skipped": [...], "seconds": float}``.
+    """
+    from tqdm import tqdm
+
+    root = Path(out)
+    root.mkdir(parents=True, exist_ok=True)
+    _check_manifest(root, config)
+    todo = shard_scenes(config, shard)
+    done = [i for i in todo if (root / scene_name(i) / "scene.json").is_file()]
+    pending = [i for i in todo if i not in done]
+    units = len(pending) * config.views * config.lights
+    t0 = time.perf_counter()
+    bar = tqdm(total=units, unit="view-light", disable=not progress, dynamic_ncols=True,
+               desc=f"synth {len(done)}/{len(todo)} scenes done")
+    for index in pending:
+        bar.set_postfix_str(scene_name(index))
+        write_scene(root, index, config, on_unit=lambda: bar.update(1))
+        bar.set_description(f"synth {todo.index(index) + 1}/{len(todo)} scenes")
+    bar.close()
+    return {"rendered": [scene_name(i) for i in pending], "skipped": [scene_name(i) for i in done],
+            "seconds": time.perf_counter() - t0}
+
+
+def write_scene(root: Path, index: int, config: SynthConfig, on_unit=lambda: None) -> Path:
+    """Render scene ``index`` into ``root/scene_XXXX`` atomically; return its folder."""
+    from . import cameras, lighting, mvs, photo, render, scene
+
+    final = root / scene_name(index)
+    partial = root / f".{scene_name(index)}.partial"
+    if partial.exists():
+        shutil.rmtree(partial)  # left by a killed run: start the scene again
+    partial.mkdir(parents=True)
+    timer = render.Timer()
+    seed = _seed(config.seed, index)
+
+    t = time.perf_counter()
+    spec = scene.generate_scene(seed % (2**31), glossy_fraction=config.glossy_fraction, trees=config.trees)
+    views = cameras.sample_views(spec, config.views, seed=_seed(seed, 1) % (2**31), width=config.res,
+                                 height=config.res)
+    kind_rng = np.random.default_rng(_seed(seed, 2))
+    lights = [lighting.sample_lighting(str(kind_rng.choice(config.kinds)), _seed(seed, 3, l), config.hdri_dir,
+                                       resolution=config.env_resolution) for l in range(config.lights)]
+    timer.add("setup", t)
+    w2c = [np.asarray(v.world_to_camera, dtype=np.float64) for v in views]
+
+    record: dict = {
+        "format": FORMAT, "version": VERSION, "index": index, "seed": seed, "scene": spec.describe(),
+        "config": config.to_json(),
+        "views": [{"K": np.asarray(v.K, dtype=np.float64), "world_to_camera": w2c[i], "width": v.width,
+                   "height": v.height} for i, v in enumerate(views)],
+        "lights": [], "photos": [[None] * config.lights for _ in views],
+    }
+    for li, light in enumerate(lights):
+        t = time.perf_counter()
+        light.save(partial / "lights" / f"light_{li:02d}")
+        record["lights"].append({**light.to_json(), "sh": light.sh_record(w2c)})
+        timer.add("io", t)
+        t = time.perf_counter()
+        mscene = render.build_scene(spec, views, light, config.spp, config.max_depth, seed=_seed(seed, 4, li) % (2**31))
+        timer.add("build", t)
+        for vi, cam in enumerate(views):
+            vdir = partial / f"view_{vi:02d}"
+            if li == 0:
+                t = time.perf_counter()
+                geo = render.render_geometry(mscene, vi, cam, config.gbuffer_spp, _seed(seed, 5, vi) % (2**31))
+                timer.add("gbuffer", t)
+                t = time.perf_counter()
+                mvs_depth = mvs.degrade_depth(geo.depth, geo.albedo, np.random.default_rng(_seed(seed, 6, vi)))
+                io.write_exr(vdir / "albedo.exr", geo.albedo)
+                io.write_exr(vdir / "normal.exr", geo.normal)
+                io.write_exr(vdir / "depth.exr", geo.depth)
+                io.write_exr(vdir / "mvs_depth.exr", mvs_depth)
+                io.write_png(vdir / "sky_mask.png", geo.sky_mask.astype(np.float32))
+                timer.add("io", t)
+            lb = render.render_lit(mscene, vi, light, config.spp, config.shadow_spp,
+                                   _seed(seed, 7, vi, li) % (2**31), timer)
+            t = time.perf_counter()
+            rng = np.random.default_rng(_seed(seed, 8, vi, li))
+            params = photo.sample_photo_params(rng, lb.radiance)
+            ldir = vdir / f"light_{li:02d}"
+            io.write_exr(ldir / "radiance.exr", lb.radiance)
+            io.write_exr(ldir / "shadow.exr", lb.shadow)
+            io.write_exr(ldir / "direct_shadow.exr", lb.direct_shadow)
+            io.write_png(ldir / "photo.png", photo.make_photo(lb.radiance, params, rng).astype(np.float32) / 255.0)
+            record["photos"][vi][li] = params.to_json()
+            timer.add("io", t)
+            on_unit()
+    io.write_json(partial / "timing.json", timer.seconds)
+    io.write_json(partial / "scene.json", record)  # last: its presence marks the scene complete
+    if final.exists():
+        shutil.rmtree(final)
+    partial.rename(final)
+    return final
+
+
+def finished_scenes(root: str | Path) -> Iterable[Path]:
+    """Complete scene folders under ``root``, sorted."""
+    return sorted(p.parent for p in Path(root).glob("scene_*/scene.json"))
