@@ -74,7 +74,8 @@ def _add_synth(sub: argparse._SubParsersAction) -> None:
                                                     "(default: the maps shipped in the package)")
     p.add_argument("--max-depth", type=_positive_int, default=8, help="path length (bounces + 1)")
     p.add_argument("--gbuffer-spp", type=_positive_int, default=16)
-    p.add_argument("--shadow-spp", type=_positive_int, default=16)
+    p.add_argument("--shadow-spp", type=_positive_int, default=32,
+                   help="shadow samples per pixel (x4 for lightings without a sun)")
     p.add_argument("--env-res", type=_positive_int, default=128, help="sky map height for sun/sky lightings")
     p.add_argument("--kinds", nargs="+", default=["sunsky", "evening", "overcast", "hdri"],
                    help="lighting kinds to draw from")

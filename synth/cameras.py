@@ -255,7 +255,7 @@ def sample_views(
             the same pair gives the same cameras.
         width, height: image size in pixels.
         fov_range: horizontal field of view range ``(f0, f1)`` in degrees: uniform in
-            ``[f0, f1 - 0.7 (f1 - f0) s]`` where ``s`` in [0, 1] is the view's position
+            ``[f0, f1 - 0.7 (f1 - f0) u]`` where ``u`` in [0, 1] is the view's position
             in the log-distance range (far views zoom in).
         distance_range: horizontal eye distance from the landmark centre, in units of
             ``spec.landmark_radius`` (log-uniform: near views are as common as far ones).
@@ -266,7 +266,9 @@ def sample_views(
         max_occluded: at most this fraction of the rays may first hit props or trees
             (a tree in the foreground is fine, a view filled by one is not).
         probe: ray grid size for the acceptance test (``probe x probe`` rays).
-        max_attempts: candidate views tried per view before giving up.
+        max_attempts: candidate views tried per view before giving up; after each
+            tenth of them the distance and lens ranges shrink by 25 % towards
+            ``(distance_range[0], fov_range[0])``.
 
     Returns:
         ``n_views`` single :class:`physrelight.camera.Camera` s (float64, centred
@@ -302,17 +304,22 @@ def sample_views(
     cams: list[Camera] = []
     for k in range(n_views):
         best = (-1.0, -1.0)
-        for _ in range(max_attempts):
+        for attempt in range(max_attempts):
             yaw = spec.front_yaw + math.radians(rng.uniform(-yaw_range_deg, yaw_range_deg))
-            s = rng.uniform(0.0, 1.0)
-            dist = radius * d0 * (d1 / d0) ** s  # log-uniform
+            # Slender landmarks (a column, a thin tower) rarely cover 15 % of a wide or
+            # distant frame: after each failed tenth of the attempts, draw distance and
+            # lens from a range shrunk towards the near end and the narrow lens (easy
+            # landmarks are accepted within the first few attempts, unaffected).
+            reach = 0.75 ** (10 * attempt // max_attempts)
+            u = rng.uniform(0.0, 1.0)
+            dist = radius * d0 * (d1 / d0) ** (u * reach)  # log-uniform
             if rng.random() < elevated_fraction:
                 eye_h = rng.uniform(3.0, max(4.0, min(ext[1], 30.0)))
             else:
                 eye_h = rng.uniform(1.4, 1.9)
             # Far from the landmark a tourist zooms in: the widest lens allowed shrinks
             # linearly in log-distance to 30 % of the way from f0 to f1 at the far end.
-            fov = rng.uniform(f0, f1 - 0.7 * (f1 - f0) * s)
+            fov = rng.uniform(f0, f0 + (f1 - f0) * reach * (1.0 - 0.7 * u))
             target = np.array([
                 center[0] + rng.normal(0.0, 0.12 * ext[0]),
                 lo[1] + rng.uniform(0.2, 0.6) * ext[1],

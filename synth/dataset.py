@@ -28,6 +28,7 @@ from .writer import FORMAT, VERSION
 SELF_SUPERVISED_KEYS = frozenset({"photo", "mvs_depth", "sky_mask", "K", "world_to_camera"})
 GROUND_TRUTH_KEYS = frozenset({
     "albedo", "normal", "depth", "radiance", "shadow", "direct_shadow", "lighting", "sh", "env", "photo_params",
+    "glossy_mask",
 })
 ALL_KEYS = SELF_SUPERVISED_KEYS | GROUND_TRUTH_KEYS
 SPLITS = ("train", "val", "test", "all")
@@ -153,8 +154,8 @@ class SynthDataset:
             self._check_key(key)
             if key in ("K", "world_to_camera"):
                 out[key] = np.asarray(rec["views"][view][key], dtype=np.float64)
-            elif key == "sky_mask":
-                out[key] = io.read_mask(vdir / "sky_mask.png")
+            elif key in ("sky_mask", "glossy_mask"):
+                out[key] = io.read_mask(vdir / f"{key}.png")
             elif key in _VIEW_FILES:
                 out[key] = io.read_exr(vdir / _VIEW_FILES[key])
             else:

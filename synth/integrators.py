@@ -4,15 +4,16 @@ Mitsuba 3.9.1's ``aov`` integrator renders a nested integrator twice (DESIGN.md)
 path-traced radiance is rendered by ``path`` alone and the buffers by two small
 ``mi.SamplingIntegrator`` subclasses written here:
 
-* :class:`GBuffer` -- per sample: diffuse reflectance ``bsdf.eval_diffuse_reflectance``,
-  the shading normal flipped to face the ray, the hit position, and a hit flag. The
+* :class:`GBuffer` -- per sample: diffuse reflectance ``bsdf.eval_diffuse_reflectance``
+  (0 for BSDFs without a diffuse lobe), the shading normal flipped to face the ray, the
+  hit position, a hit flag and a glossy flag (BSDF with a glossy lobe). The
   film averages samples over the pixel (box filter), so dividing by the hit flag gives
   the surface-only average (albedo is not darkened by sky at silhouettes).
 * :class:`Shadow` -- per sample: the visible fraction of the sun disk (one uniformly
-  sampled direction inside the cone per sample, ``scene.ray_test``), and the
-  direct-light shadow ratio ``int V L cos / int L cos`` estimated with cosine-weighted
-  directions and the environment's radiance (a ratio estimator, so it is exactly 1 on
-  unoccluded points), plus the hit flag.
+  sampled direction inside the cone per sample, ``scene.ray_test``), and the two sums
+  of the direct-light shadow ratio ``int V L cos / int L cos`` over all emitters, with
+  Mitsuba's emitter importance sampling (a ratio estimator: exactly 1 on unoccluded
+  points), plus the hit flag.
 
 Both output only AOV channels; the colour output is zero.
 """
@@ -29,7 +30,7 @@ from synth.backend import load_mitsuba
 mi = load_mitsuba()
 import drjit as dr  # noqa: E402  (after mitsuba's variant is set)
 
-GBUFFER_CHANNELS = ("albedo.R", "albedo.G", "albedo.B", "nx", "ny", "nz", "px", "py", "pz", "hit")
+GBUFFER_CHANNELS = ("albedo.R", "albedo.G", "albedo.B", "nx", "ny", "nz", "px", "py", "pz", "hit", "glossy")
 SHADOW_CHANNELS = ("sun_visible", "direct_num", "direct_den", "hit")
 
 
@@ -46,14 +47,21 @@ class GBuffer(mi.SamplingIntegrator):
         si = scene.ray_intersect(ray, active)
         hit = si.is_valid()
         bsdf = si.bsdf(ray)
-        albedo = dr.select(hit, bsdf.eval_diffuse_reflectance(si, hit), 0.0)
+        flags = bsdf.flags()
+        diffuse = mi.has_flag(flags, mi.BSDFFlags.DiffuseReflection)
+        glossy = hit & mi.has_flag(flags, mi.BSDFFlags.GlossyReflection)
+        # eval_diffuse_reflectance is the albedo of diffuse and rough-plastic BSDFs; a
+        # conductor has no diffuse lobe (Mitsuba returns a meaningless value: 6x the
+        # tint for GGX alpha 0.2), so its albedo is 0 and it is flagged glossy.
+        albedo = dr.select(hit & diffuse, bsdf.eval_diffuse_reflectance(si, hit & diffuse), 0.0)
         n = si.sh_frame.n
         # One-sided meshes seen from behind: report the normal that faces the camera.
         n = dr.select(dr.dot(n, -ray.d) < 0, -n, n)
         n = dr.select(hit, n, 0.0)
         p = dr.select(hit, si.p, 0.0)
         h = dr.select(hit, 1.0, 0.0)
-        aovs = [albedo[0], albedo[1], albedo[2], n[0], n[1], n[2], p[0], p[1], p[2], h]
+        g = dr.select(glossy, 1.0, 0.0)
+        aovs = [albedo[0], albedo[1], albedo[2], n[0], n[1], n[2], p[0], p[1], p[2], h, g]
         return mi.Spectrum(0.0), True, aovs
 
 
@@ -81,17 +89,13 @@ class Shadow(mi.SamplingIntegrator):
         n = si.sh_frame.n
         n = dr.select(dr.dot(n, -ray.d) < 0, -n, n)
 
-        # Direct-light ratio int V L cos / int L cos with cosine-weighted directions:
-        # cos/pdf = pi cancels, so each sample adds V*Y(L) and Y(L).
-        wo = mi.Frame3f(n).to_world(mi.warp.square_to_cosine_hemisphere(sampler.next_2d(hit)))
-        env = scene.environment()
-        lum = mi.Float(0.0)
-        if env is not None:
-            env_si = dr.zeros(mi.SurfaceInteraction3f)
-            env_si.wi = -wo
-            radiance = env.eval(env_si, hit)
-            lum = 0.2126 * radiance[0] + 0.7152 * radiance[1] + 0.0722 * radiance[2]
-        visible = ~scene.ray_test(si.spawn_ray(wo), hit)
+        # Direct-light ratio int V L cos / int L cos with emitter sampling (Mitsuba's
+        # importance sampling of the sky map and the sun): each sample adds Y(L cos / pdf)
+        # to the denominator and, if unoccluded, to the numerator.
+        ds, weight = scene.sample_emitter_direction(si, sampler.next_2d(hit), False, hit)
+        cos = dr.maximum(dr.dot(ds.d, n), 0.0)
+        lum = (0.2126 * weight[0] + 0.7152 * weight[1] + 0.0722 * weight[2]) * cos
+        visible = ~scene.ray_test(si.spawn_ray_to(ds.p), hit & (cos > 0))
         num = dr.select(hit & visible, lum, 0.0)
         den = dr.select(hit, lum, 0.0)
 

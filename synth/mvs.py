@@ -19,7 +19,7 @@ from scipy import ndimage
 class MVSParams:
     """Knobs of the degradation (defaults give ~10-25 % holes on the foreground)."""
 
-    edge_threshold: float = 0.04  # relative depth jump between neighbours that makes a hole
+    edge_threshold: float = 0.05  # |second difference of 1/depth| / (1/depth) that marks an edge
     edge_dilation: int = 1  # pixels
     thin_radius: int = 1  # structures thinner than ~2r+1 pixels vanish
     texture_threshold: float = 0.004  # local std of albedo luminance below which matching may fail
@@ -50,15 +50,19 @@ def degrade_depth(depth: np.ndarray, albedo: np.ndarray, rng: np.random.Generato
     valid = np.isfinite(depth) & (depth > 0)
     d = np.where(valid, depth, 0.0)
 
-    # Depth discontinuities: relative jump to any 4-neighbour (or a neighbour on the sky).
+    # Depth discontinuities. Inverse depth is linear in the image on any plane, so its
+    # second difference vanishes on smooth surfaces (even a grazing ground plane, whose
+    # depth changes fast) and is large at occlusion boundaries.
+    inv = np.where(valid, 1.0 / np.maximum(d, 1e-12), 0.0)
     jump = np.zeros(depth.shape, dtype=bool)
     for axis in (0, 1):
-        a = d
-        b = np.roll(d, 1, axis=axis)
-        rel = np.abs(a - b) / np.maximum(np.minimum(a, b), 1e-6)
-        edge = (rel > params.edge_threshold) | (valid != np.roll(valid, 1, axis=axis))
+        prev, nxt = np.roll(inv, 1, axis=axis), np.roll(inv, -1, axis=axis)
+        second = np.abs(prev - 2 * inv + nxt) / np.maximum(inv, 1e-12)
+        both = valid & np.roll(valid, 1, axis=axis) & np.roll(valid, -1, axis=axis)
+        edge = (second > params.edge_threshold) & both
+        edge |= valid & ~(np.roll(valid, 1, axis=axis) & np.roll(valid, -1, axis=axis))  # next to sky
         edge &= ~_wrapped_border(depth.shape, axis)
-        jump |= edge | np.roll(edge, -1, axis=axis)
+        jump |= edge
     if params.edge_dilation:
         jump = ndimage.binary_dilation(jump, iterations=params.edge_dilation)
 
@@ -82,12 +86,12 @@ def degrade_depth(depth: np.ndarray, albedo: np.ndarray, rng: np.random.Generato
 
 
 def _wrapped_border(shape: tuple[int, int], axis: int) -> np.ndarray:
-    """Mask of the row/column where np.roll wraps around (not a real neighbour)."""
+    """Mask of the first and last row/column, where np.roll wraps around (no real neighbour)."""
     m = np.zeros(shape, dtype=bool)
     if axis == 0:
-        m[0, :] = True
+        m[[0, -1], :] = True
     else:
-        m[:, 0] = True
+        m[:, [0, -1]] = True
     return m
 
 

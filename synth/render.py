@@ -43,11 +43,14 @@ class ViewBuffers:
     """Geometry of one view (independent of lighting).
 
     Attributes:
-        albedo: ``(H, W, 3)`` diffuse reflectance averaged over the pixel's surface samples; 0 on sky.
+        albedo: ``(H, W, 3)`` diffuse reflectance averaged over the pixel's surface samples
+            (anti-aliased like the radiance); 0 on sky pixels.
         normal: ``(H, W, 3)`` unit normal at the pixel centre, camera frame, facing the camera; 0 on sky.
         depth: ``(H, W)`` z-depth at the pixel centre; 0 on sky.
         sky_mask: ``(H, W)`` bool, True where the pixel-centre ray hits nothing.
         coverage: ``(H, W)`` fraction of the pixel footprint covered by surfaces.
+        glossy: ``(H, W)`` fraction of the footprint on non-Lambertian materials
+            (rough plastic, conductor; conductors have albedo 0).
     """
 
     albedo: np.ndarray
@@ -55,6 +58,7 @@ class ViewBuffers:
     depth: np.ndarray
     sky_mask: np.ndarray
     coverage: np.ndarray
+    glossy: np.ndarray
 
 
 @dataclass
@@ -123,9 +127,11 @@ def render_geometry(scene: Any, index: int, camera: Camera, spp: int, seed: int)
     g = _film(scene, integrators.gbuffer_integrator(), index, spp, seed)
     cov = g[..., 3 + integrators.GBUFFER_CHANNELS.index("hit")]
     albedo = g[..., 3:6] / np.maximum(cov, 1e-12)[..., None]
-    albedo = np.where((cov > 0)[..., None], albedo, 0.0)
+    albedo = np.where(((cov > 0) & hit)[..., None], albedo, 0.0)  # sky pixels carry no albedo
+    glossy = g[..., 3 + integrators.GBUFFER_CHANNELS.index("glossy")]
     return ViewBuffers(albedo=albedo.astype(np.float32), normal=normal.astype(np.float32),
-                       depth=depth.astype(np.float32), sky_mask=~hit, coverage=cov.astype(np.float32))
+                       depth=depth.astype(np.float32), sky_mask=~hit, coverage=cov.astype(np.float32),
+                       glossy=glossy.astype(np.float32))
 
 
 def render_lit(scene: Any, index: int, lighting: Lighting, spp: int, shadow_spp: int, seed: int,
@@ -137,9 +143,12 @@ def render_lit(scene: Any, index: int, lighting: Lighting, spp: int, shadow_spp:
     timer.add("path", t0)
 
     t0 = time.perf_counter()
-    # Rendered sun is a delta: its visibility is the shadow of the rendered image.
+    # Rendered sun is a delta: its visibility is the shadow of the rendered image. Without
+    # a sun the shadow is the direct-light ratio over the whole sky, whose visibility
+    # varies over the hemisphere: 4x the samples keep its noise near the sun case's.
     shadow_integ = integrators.shadow_integrator(lighting.sun_direction, 0.0)
-    s = _film(scene, shadow_integ, index, shadow_spp, seed + 7919)
+    spp_s = shadow_spp if lighting.has_sun else 4 * shadow_spp
+    s = _film(scene, shadow_integ, index, spp_s, seed + 7919)
     names = integrators.SHADOW_CHANNELS
     cov = s[..., 3 + names.index("hit")]
     sun = np.where(cov > 0, s[..., 3 + names.index("sun_visible")] / np.maximum(cov, 1e-12), 1.0)

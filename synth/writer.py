@@ -10,7 +10,8 @@ Layout (format ``physrelight-synth``, version 1)::
     OUT/scene_0000/timing.json         seconds per phase (the only non-deterministic file)
     OUT/scene_0000/lights/light_YY/    env.exr (sky without the sun, world frame) + lighting.json
     OUT/scene_0000/view_XX/            albedo.exr, normal.exr (camera frame), depth.exr,
-                                       sky_mask.png (255 = sky), mvs_depth.exr (0 = missing)
+                                       sky_mask.png (255 = sky), mvs_depth.exr (0 = missing),
+                                       glossy_mask.png (255 = non-Lambertian material)
     OUT/scene_0000/view_XX/light_YY/   radiance.exr (path traced), shadow.exr,
                                        direct_shadow.exr, photo.png (the training input)
 
@@ -55,7 +56,7 @@ class SynthConfig:
     seed: int = 0
     max_depth: int = 8
     gbuffer_spp: int = 16
-    shadow_spp: int = 16
+    shadow_spp: int = 32
     env_resolution: int = 128
     kinds: tuple[str, ...] = KINDS
     hdri_dir: str | None = None
@@ -204,6 +205,7 @@ def write_scene(root: Path, index: int, config: SynthConfig, on_unit=lambda: Non
                 io.write_exr(vdir / "depth.exr", geo.depth)
                 io.write_exr(vdir / "mvs_depth.exr", mvs_depth)
                 io.write_png(vdir / "sky_mask.png", geo.sky_mask.astype(np.float32))
+                io.write_png(vdir / "glossy_mask.png", (geo.glossy >= 0.5).astype(np.float32))
                 timer.add("io", t)
             lb = render.render_lit(mscene, vi, light, config.spp, config.shadow_spp,
                                    _seed(seed, 7, vi, li) % (2**31), timer)
