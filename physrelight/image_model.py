@@ -39,9 +39,15 @@ def _lighting(c: torch.Tensor, batch: int, name: str = "lighting") -> tuple[torc
     return c, order
 
 
+def _sq_norm(n: torch.Tensor) -> torch.Tensor:
+    """``(B, 1, H, W)`` squared length of ``(B, 3, H, W)`` vectors (elementwise: a channel
+    reduction with vector_norm is ~30x slower on CPU)."""
+    return (n[:, 0:1] ** 2 + n[:, 1:2] ** 2 + n[:, 2:3] ** 2)
+
+
 def _valid_normals(n: torch.Tensor) -> torch.Tensor:
     """``(B, 1, H, W)`` True where the normal has non-zero length (a surface, not sky)."""
-    return torch.linalg.vector_norm(n.detach(), dim=1, keepdim=True) > 1e-6
+    return _sq_norm(n.detach()) > 1e-12
 
 
 def _shading_basis(n: torch.Tensor, order: int) -> torch.Tensor:
@@ -49,7 +55,7 @@ def _shading_basis(n: torch.Tensor, order: int) -> torch.Tensor:
     valid = _valid_normals(n)
     # Replace missing normals by +z so the basis is defined, then zero those pixels.
     safe = torch.where(valid, n, torch.tensor([0.0, 0.0, 1.0], dtype=n.dtype, device=n.device)[None, :, None, None])
-    safe = safe / torch.linalg.vector_norm(safe, dim=1, keepdim=True)
+    safe = safe * torch.rsqrt(_sq_norm(safe))
     y = sh._basis_xyz(safe[:, 0], safe[:, 1], safe[:, 2], order, dim=1)  # (B, K, H, W)
     a = sh.irradiance_transfer(order, n.dtype).to(n.device) / math.pi
     return y * (a[None, :, None, None] * valid)

@@ -71,6 +71,7 @@ overcast, and equals the record's brute-force irradiance within 0.1 %.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -668,16 +669,17 @@ def hdri(path: str | os.PathLike, azimuth_deg: float = 0.0, split_sun: bool = Tr
          scale: float = 1.0, resolution: int | None = None) -> Lighting:
     """A real environment map, turned about +Y so every feature's azimuth grows by ``azimuth_deg``.
 
-    The map keeps its own resolution. With ``split_sun`` (default) the sun is split off
-    the rotated map (:func:`physrelight.envmap.split_sun`: energy conserving, a sun only
-    if it carries >= 1 % of the map's luminance) and becomes the record's directional
-    sun, with the physical disk radius; the render uses exactly this sky + sun. Without
-    it the whole rotated map is the sky and there is no sun.
+    With ``split_sun`` (default) the sun is split off the rotated map
+    (:func:`physrelight.envmap.split_sun`: energy conserving, a sun only if it carries
+    >= 1 % of the map's luminance) and becomes the record's directional sun, with the
+    physical disk radius; the render uses exactly this sky + sun. Without it the whole
+    rotated map is the sky and there is no sun.
 
     Args:
         path: EXR file (lat-long, Mitsuba layout, row 0 = zenith).
-        azimuth_deg: rotation about +Y in degrees (a multiple of ``360 / W`` is an exact
-            column shift).
+        azimuth_deg: rotation about +Y in degrees. A multiple of ``360 / W`` of the
+            result's sky is an exact column shift, and then the read, the sun split and
+            the downsampling are cached per file (what :func:`sample_lighting` draws).
         split_sun: split the sun into a directional light.
         scale: radiance multiplier.
         resolution: if given and below the map's height, the sky (after the sun split)
@@ -691,36 +693,74 @@ def hdri(path: str | os.PathLike, azimuth_deg: float = 0.0, split_sun: bool = Tr
     scale = _check_finite_number(scale, "scale")
     if scale <= 0:
         raise ValueError(f"scale must be positive, got {scale}")
-    env = _envmap.read(p)
-    if env.shape[1] != 2 * env.shape[0]:
-        raise ValueError(f"HDRI {str(p)!r} must be a 2:1 lat-long map, got {env.shape[1]}x{env.shape[0]}")
-    env = _rotate_azimuth(env.astype(np.float64), azimuth_deg) * scale
+    if resolution is not None:
+        resolution = _check_resolution(resolution)
+    native, sky0, sun0, e_sun0, fraction = _hdri_parts(str(p.resolve()), bool(split_sun), resolution)
+    w = sky0.shape[1]
+    shift = azimuth_deg / 360.0 * w
+    if abs(shift - round(shift)) < 1e-6:
+        # Exact: rolling columns commutes with the split and the downsampling.
+        sky = np.roll(sky0.astype(np.float64), int(round(shift)) % w, axis=1)
+        sun_direction = None if sun0 is None else _rotate_azimuth_direction(sun0, azimuth_deg)
+        e_sun = e_sun0
+    else:
+        env = _rotate_azimuth(_envmap.read(p).astype(np.float64), azimuth_deg)
+        sun_direction, e_sun, sky, fraction = None, np.zeros(3), env, 0.0
+        if split_sun:
+            part = _envmap.split_sun(env)
+            sky = part.sky
+            if part.has_sun:
+                sun_direction, e_sun, fraction = part.direction, np.asarray(part.irradiance, np.float64), part.fraction
+        sky = np.clip(np.asarray(sky, dtype=np.float64), 0.0, None)
+        if resolution is not None and resolution < sky.shape[0]:
+            sky = np.clip(_envmap.downsample(sky, resolution), 0.0, None)
+    sky = sky * scale
+    e_sun = np.asarray(e_sun, dtype=np.float64) * scale
     params: dict[str, Any] = {
         "hdri": p.stem,
         "hdri_file": p.name,
         "azimuth_deg": float(azimuth_deg),
         "scale": float(scale),
-        "resolution": int(env.shape[0]),
+        "resolution": int(sky.shape[0]),
+        "native_resolution": int(native),
         "indoor": p.stem in INDOOR_HDRIS,
         "split_sun": bool(split_sun),
     }
-    sun_direction, e_sun, sky = None, np.zeros(3), env
-    if split_sun:
-        part = _envmap.split_sun(env)
-        sky = part.sky
-        if part.has_sun:
-            sun_direction, e_sun = part.direction, np.asarray(part.irradiance, dtype=np.float64)
-            elevation, azimuth = angles_from_direction(sun_direction)
-            params.update(sun_elevation_deg=elevation, sun_azimuth_deg=azimuth, sun_fraction=float(part.fraction))
+    if sun_direction is not None:
+        elevation, azimuth = angles_from_direction(sun_direction)
+        params.update(sun_elevation_deg=elevation, sun_azimuth_deg=azimuth, sun_fraction=float(fraction))
     params["sun_emitter"] = "directional" if sun_direction is not None else "none"
-    sky = np.clip(np.asarray(sky, dtype=np.float64), 0.0, None)
-    if resolution is not None and _check_resolution(resolution) < sky.shape[0]:
-        sky = np.clip(_envmap.downsample(sky, int(resolution)), 0.0, None)
-        params["resolution"] = int(resolution)
     sky = sky.astype(np.float32)
     params.update(_exposure(sky, sun_direction, e_sun))
     return Lighting(kind="hdri", params=params, sky=sky, sun_direction=sun_direction,
                     sun_irradiance=e_sun, sun_radius_deg=SUN_RADIUS_DEG)
+
+
+@functools.lru_cache(maxsize=16)
+def _hdri_parts(path: str, split_sun: bool, resolution: int | None
+                ) -> tuple[int, np.ndarray, np.ndarray | None, np.ndarray, float]:
+    """Read, split and downsample a map once: (native height, sky, sun direction, sun irradiance, fraction)."""
+    env = _envmap.read(path).astype(np.float64)
+    if env.shape[1] != 2 * env.shape[0]:
+        raise ValueError(f"HDRI {path!r} must be a 2:1 lat-long map, got {env.shape[1]}x{env.shape[0]}")
+    sky, sun, e_sun, fraction = env, None, np.zeros(3), 0.0
+    if split_sun:
+        part = _envmap.split_sun(env)
+        sky = part.sky.astype(np.float64)
+        if part.has_sun:
+            sun, e_sun, fraction = part.direction, np.asarray(part.irradiance, dtype=np.float64), part.fraction
+    sky = np.clip(sky, 0.0, None)
+    if resolution is not None and resolution < sky.shape[0]:
+        sky = np.clip(_envmap.downsample(sky, resolution), 0.0, None)
+    sky = sky.astype(np.float32)
+    sky.setflags(write=False)
+    return env.shape[0], sky, sun, e_sun, fraction
+
+
+def _rotate_azimuth_direction(direction: np.ndarray, azimuth_deg: float) -> np.ndarray:
+    """The direction whose azimuth is ``azimuth_deg`` larger (same elevation)."""
+    elevation, azimuth = angles_from_direction(direction)
+    return direction_from_angles(elevation, azimuth + azimuth_deg)
 
 
 def _rotate_azimuth(env: np.ndarray, azimuth_deg: float) -> np.ndarray:
@@ -755,7 +795,8 @@ def sample_lighting(kind: str, seed: int | np.random.Generator, hdri_dir: str | 
 
     For ``hdri``, a map is drawn uniformly from :func:`list_hdris` (``hdri_dir`` or the
     shipped maps; indoor ones only with ``include_indoor``) and turned by an azimuth
-    uniform in [0, 360), and its sky downsampled to ``resolution`` (integral kept).
+    uniform over the ``2 resolution`` column positions of its sky (an exact rotation),
+    and its sky downsampled to ``resolution`` (integral kept).
     """
     _check_kind(kind)
     rng = _rng(seed)
@@ -767,4 +808,7 @@ def sample_lighting(kind: str, seed: int | np.random.Generator, hdri_dir: str | 
         return evening(rng, resolution=resolution)
     maps = list_hdris(hdri_dir, include_indoor)
     pick = int(rng.integers(len(maps)))
-    return hdri(maps[pick], azimuth_deg=float(rng.uniform(0.0, 360.0)), resolution=resolution)
+    # A whole number of sky columns: an exact, cached rotation (1.4 deg steps at H = 128).
+    columns = 2 * resolution
+    azimuth = float(rng.integers(columns)) * 360.0 / columns
+    return hdri(maps[pick], azimuth_deg=azimuth, resolution=resolution)
