@@ -87,12 +87,26 @@ def _add_synth(sub: argparse._SubParsersAction) -> None:
 
 _SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_demo, _add_synth]
 
+# Subcommands owned by other packages: each module has ``add_parser(subparsers)`` and
+# keeps its heavy imports (Mitsuba, training code) inside the handler.
+_PACKAGE_SUBCOMMANDS = ("validation.cli", "learned.cli")
+
 
 def build_parser() -> argparse.ArgumentParser:
+    import importlib
+
     parser = argparse.ArgumentParser(prog="physrelight", description="Single-image outdoor relighting, physics-checked.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in _SUBCOMMANDS:
         add(sub)
+    for name in _PACKAGE_SUBCOMMANDS:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as err:
+            if err.name != name and not name.startswith(f"{err.name}."):
+                raise  # a real missing dependency, not a package that is not there yet
+            continue
+        module.add_parser(sub)
     return parser
 
 
