@@ -1,0 +1,118 @@
+"""Checkpoints in ``safetensors`` (no pickle) with a JSON sidecar.
+
+``RUN/checkpoints/step_XXXXXXX.safetensors`` holds the model (``model.*``), the Adam
+state (``optim.<param index>.<exp_avg|exp_avg_sq|step>``) and the torch RNG state
+(``rng.torch``); ``step_XXXXXXX.json`` holds the step, the configuration, the optimizer's
+param groups and anything else JSON-able. The sidecar is written last and its presence
+marks a checkpoint complete, so a run killed while saving resumes from the previous one.
+
+Shipped weights (:func:`export_weights`) are the model tensors only, with the network's
+hyperparameters in the safetensors metadata.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from pathlib import Path
+from typing import Any
+
+import torch
+from safetensors.torch import load_file, save_file
+from safetensors import safe_open
+
+__all__ = ["export_weights", "latest_checkpoint", "load_checkpoint", "load_weights", "save_checkpoint"]
+
+_NAME = re.compile(r"^step_(\d{7})\.json$")
+
+
+def _atomic_save_tensors(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[str, str] | None = None) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    save_file({k: v.detach().contiguous().cpu() for k, v in tensors.items()}, str(tmp), metadata=metadata)
+    os.replace(tmp, path)
+
+
+def _atomic_write_json(data: Any, path: Path) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
+    os.replace(tmp, path)
+
+
+def save_checkpoint(run: str | Path, step: int, model: torch.nn.Module, optimizer: torch.optim.Optimizer,
+                    extra: dict[str, Any]) -> Path:
+    """Write the checkpoint of ``step`` (optimizer steps done) into ``run/checkpoints``; return the sidecar path."""
+    d = Path(run) / "checkpoints"
+    d.mkdir(parents=True, exist_ok=True)
+    tensors = {f"model.{k}": v for k, v in model.state_dict().items()}
+    opt = optimizer.state_dict()
+    for pid, state in opt["state"].items():
+        for key, value in state.items():
+            tensors[f"optim.{pid}.{key}"] = value if isinstance(value, torch.Tensor) else torch.tensor(value)
+    tensors["rng.torch"] = torch.get_rng_state()
+    _atomic_save_tensors(tensors, d / f"step_{step:07d}.safetensors")
+    sidecar = {"step": step, "param_groups": opt["param_groups"], **extra}
+    path = d / f"step_{step:07d}.json"
+    _atomic_write_json(sidecar, path)
+    return path
+
+
+def latest_checkpoint(run: str | Path) -> Path | None:
+    """Sidecar of the latest complete checkpoint in ``run``, or None."""
+    d = Path(run) / "checkpoints"
+    if not d.is_dir():
+        return None
+    found = sorted(p for p in d.iterdir() if _NAME.match(p.name) and p.with_suffix(".safetensors").is_file())
+    return found[-1] if found else None
+
+
+def load_checkpoint(sidecar: str | Path, model: torch.nn.Module | None = None,
+                    optimizer: torch.optim.Optimizer | None = None, restore_rng: bool = True) -> dict[str, Any]:
+    """Load a checkpoint into ``model``/``optimizer`` (either may be None); return the sidecar dict."""
+    sidecar = Path(sidecar)
+    if not sidecar.is_file():
+        raise FileNotFoundError(f"no checkpoint sidecar at {str(sidecar)!r}")
+    meta = json.loads(sidecar.read_text())
+    tensors = load_file(str(sidecar.with_suffix(".safetensors")))
+    if model is not None:
+        model.load_state_dict({k[6:]: v for k, v in tensors.items() if k.startswith("model.")})
+    if optimizer is not None:
+        state: dict[int, dict[str, torch.Tensor]] = {}
+        for k, v in tensors.items():
+            if k.startswith("optim."):
+                _, pid, key = k.split(".", 2)
+                state.setdefault(int(pid), {})[key] = v
+        optimizer.load_state_dict({"state": state, "param_groups": meta["param_groups"]})
+    if restore_rng and "rng.torch" in tensors:
+        torch.set_rng_state(tensors["rng.torch"])
+    return meta
+
+
+def export_weights(sidecar: str | Path, dest: str | Path, kind: str) -> Path:
+    """Write the model tensors of a checkpoint to ``dest`` (safetensors, weights only).
+
+    The metadata records ``kind`` ("inverse" or "shadow"), ``width``, ``depth``, ``res``,
+    ``step`` and the training seconds, so :func:`load_weights` rebuilds the network.
+    """
+    sidecar = Path(sidecar)
+    meta = json.loads(sidecar.read_text())
+    tensors = {k[6:]: v for k, v in load_file(str(sidecar.with_suffix(".safetensors"))).items()
+               if k.startswith("model.")}
+    cfg = meta["config"]
+    info = {"kind": kind, "width": str(cfg["width"]), "depth": str(cfg["depth"]), "res": str(cfg["res"]),
+            "step": str(meta["step"]), "train_seconds": f"{meta.get('train_seconds', 0.0):.1f}",
+            "config": json.dumps(cfg, sort_keys=True)}
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    _atomic_save_tensors(tensors, dest, metadata=info)
+    return dest
+
+
+def load_weights(path: str | Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
+    """Tensors and metadata of a file written by :func:`export_weights`."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no weights at {str(path)!r}")
+    with safe_open(str(path), framework="pt") as f:
+        meta = dict(f.metadata() or {})
+    return load_file(str(path)), meta

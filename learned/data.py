@@ -1,0 +1,164 @@
+"""Training batches of photo pairs from the self-supervised loader.
+
+Only what the paper may use goes in: photos, MVS-like depth, cameras (K, world_to_camera)
+and sky masks, read through :class:`synth.dataset.SynthDataset` in
+``mode="self_supervised"`` (which raises ``GroundTruthAccessError`` for anything else).
+
+A pair is two photos of one scene: view a under lighting la and view b under lighting lb
+(``(b, lb) != (a, la)``; b may equal a with another lighting). Photos are linearised with
+:func:`physrelight.colour.from_ldr` (sRGB curve: the true response is unknown to the
+learner) and resized to the training resolution (area averaging for photos, nearest for
+depth and masks, intrinsics scaled to match).
+
+Batches are a pure function of ``(seed, step, rank)`` (:meth:`PairSampler.batch`), so a
+resumed or distributed run sees exactly the batches an uninterrupted one would.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from physrelight import camera, colour
+from synth.dataset import SynthDataset, to_chw
+
+__all__ = ["Batch", "PairSampler", "load_photo", "resize_view"]
+
+
+@dataclass
+class Batch:
+    """A batch of ``B`` pairs; every tensor has the pair's views ``a`` then ``b`` stacked.
+
+    Attributes:
+        image: ``(2B, 3, H, W)`` linearised photos, rows ``[a_0..a_{B-1}, b_0..b_{B-1}]``.
+        depth: ``(2B, 1, H, W)`` MVS-like z-depth (0 = missing).
+        sky: ``(2B, 1, H, W)`` bool, True on sky.
+        K: ``(2B, 3, 3)`` intrinsics at the training resolution.
+        world_to_camera: ``(2B, 4, 4)``.
+        keys: ``[(scene, view, light)]`` of the ``2B`` photos.
+    """
+
+    image: torch.Tensor
+    depth: torch.Tensor
+    sky: torch.Tensor
+    K: torch.Tensor
+    world_to_camera: torch.Tensor
+    keys: list[tuple[str, int, int]]
+
+    @property
+    def pairs(self) -> int:
+        return self.image.shape[0] // 2
+
+    def partner(self, x: torch.Tensor) -> torch.Tensor:
+        """Rows reordered so row i holds the other photo of row i's pair (``[b; a]``)."""
+        n = self.pairs
+        return torch.cat([x[n:], x[:n]], 0)
+
+
+def resize_view(image: torch.Tensor, depth: torch.Tensor, sky: torch.Tensor, K: torch.Tensor,
+                res: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Resize one view to ``res x res``.
+
+    Args:
+        image: ``(3, H, W)``; depth ``(1, H, W)``; sky ``(1, H, W)`` bool; K ``(3, 3)``.
+        res: output size (square; the source must be square too).
+
+    Returns:
+        The same four, at ``res``; K scaled by ``res / W`` (pixel centres stay centred:
+        ``u' = u * res / W`` with corners at 0).
+    """
+    h, w = image.shape[-2:]
+    if h != w:
+        raise ValueError(f"only square images are supported, got {h}x{w}")
+    if res == w:
+        return image, depth, sky, K
+    s = res / w
+    img = F.interpolate(image[None], size=(res, res), mode="area" if res < w else "bilinear",
+                        align_corners=None if res < w else False)[0]
+    d = F.interpolate(depth[None], size=(res, res), mode="nearest")[0]
+    m = F.interpolate(sky[None].float(), size=(res, res), mode="nearest")[0] > 0.5
+    k = K.clone()
+    k[:2] *= s
+    return img, d, m, k
+
+
+def load_photo(ds: SynthDataset, scene: str, view: int, light: int, res: int) -> dict[str, torch.Tensor]:
+    """One photo and its view data, linearised and resized (self-supervised keys only)."""
+    item = ds.load(scene, view, light, keys=("photo", "mvs_depth", "sky_mask", "K", "world_to_camera"))
+    image = to_chw(colour.from_ldr(np.clip(item["photo"], 0.0, 1.0)))
+    depth = to_chw(item["mvs_depth"])
+    sky = to_chw(item["sky_mask"].astype(np.float32)) > 0.5
+    K = torch.from_numpy(item["K"]).float()
+    image, depth, sky, K = resize_view(image, depth, sky, K, res)
+    return {"image": image, "depth": depth, "sky": sky, "K": K,
+            "world_to_camera": torch.from_numpy(item["world_to_camera"]).float()}
+
+
+class PairSampler:
+    """Deterministic batches of photo pairs from a dataset's training scenes.
+
+    Args:
+        root: dataset folder.
+        split: scene split to draw from ("train" for training).
+        res: training resolution.
+        seed: base seed.
+        cache: keep loaded photos in memory (a 64-px photo with its depth is ~65 kB).
+    """
+
+    def __init__(self, root: str | Path, split: str = "train", res: int = 64, seed: int = 0,
+                 cache: bool = True) -> None:
+        if not (isinstance(res, int) and res >= 8):
+            raise ValueError(f"res must be an integer >= 8, got {res!r}")
+        self.ds = SynthDataset(root, split=split, mode="self_supervised")
+        if not self.ds.scenes:
+            raise ValueError(f"{str(root)!r} has no scenes in split {split!r}")
+        self.res, self.seed, self.cache = res, seed, cache
+        self._cache: dict[tuple[str, int, int], dict[str, torch.Tensor]] = {}
+        self.scenes = self.ds.scenes
+        for s in self.scenes:
+            if self.ds.num_views(s) * self.ds.num_lights(s) < 2:
+                raise ValueError(f"scene {s} has a single photo; pairs need at least two")
+
+    def photo(self, key: tuple[str, int, int]) -> dict[str, torch.Tensor]:
+        if key in self._cache:
+            return self._cache[key]
+        p = load_photo(self.ds, *key, res=self.res)
+        if self.cache:
+            self._cache[key] = p
+        return p
+
+    def pair_keys(self, batch_size: int, step: int, rank: int = 0) -> list[tuple[tuple, tuple]]:
+        """The ``batch_size`` pairs of ``(step, rank)``: same arguments, same pairs."""
+        rng = np.random.default_rng([self.seed, step, rank])
+        out = []
+        for _ in range(batch_size):
+            s = self.scenes[int(rng.integers(len(self.scenes)))]
+            nv, nl = self.ds.num_views(s), self.ds.num_lights(s)
+            a = int(rng.integers(nv * nl))
+            b = (a + 1 + int(rng.integers(nv * nl - 1))) % (nv * nl)  # any other photo of the scene
+            out.append(((s, a // nl, a % nl), (s, b // nl, b % nl)))
+        return out
+
+    def batch(self, batch_size: int, step: int, rank: int = 0) -> Batch:
+        """A :class:`Batch` of ``batch_size`` pairs for ``(step, rank)``."""
+        if not (isinstance(batch_size, int) and batch_size >= 1):
+            raise ValueError(f"batch_size must be a positive integer, got {batch_size!r}")
+        pairs = self.pair_keys(batch_size, step, rank)
+        keys = [p[0] for p in pairs] + [p[1] for p in pairs]
+        items = [self.photo(k) for k in keys]
+        stack = {name: torch.stack([it[name] for it in items]) for name in items[0]}
+        return Batch(image=stack["image"], depth=stack["depth"], sky=stack["sky"], K=stack["K"],
+                     world_to_camera=stack["world_to_camera"], keys=keys)
+
+
+def mvs_normals(batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
+    """Normals of the MVS-like depth ``(2B, 3, H, W)`` and where they are valid ``(2B, 1, H, W)`` bool.
+
+    Depth edges (relative jump > 10 %) and sky are excluded.
+    """
+    n, valid = camera.normals_from_depth(batch.depth, batch.K, max_rel_jump=0.1)
+    return n, valid & ~batch.sky

@@ -1,0 +1,169 @@
+"""Validation of the first stage against ground truth (never used for training).
+
+Metrics, each next to a trivial baseline:
+
+* **albedo si-MSE**: per image, the prediction is scaled by the least-squares scalar
+  ``alpha = <p, g> / <p, p>`` over foreground pixels and channels (the albedo/lighting
+  scale is ambiguous from one photo), then the MSE; mean over images.
+  Baseline: the linearised photo as albedo.
+* **normal MAE**: mean angular error in degrees over foreground pixels (mean per image,
+  then over images). Baseline: the camera-facing constant ``(0, 0, 1)``.
+* **shadow AP**: average precision of ``1 - s`` for detecting shadowed pixels
+  (ground-truth ``s < 0.5``), pooled over all foreground pixels. Baseline: no shadow
+  (a constant score), whose AP is the fraction of shadowed pixels (chance).
+* **lighting relative error**: ``||L - L_gt|| / ||L_gt||`` (27-D) with ``L_gt`` the true
+  camera-frame SH in the photo's units (true SH times ``2**ev`` times the white-balance
+  gains of the photo), raw and scale-invariant (``L`` scaled by its optimal scalar, since
+  albedo and lighting trade a global scale). Baseline: the prior's mean lighting.
+
+Ground truth is read with ``SynthDataset(mode="full")``; photos go through the same
+linearisation as in training.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from physrelight.lighting_prior import LightingPrior
+from synth.dataset import SynthDataset, to_chw
+
+from .data import load_photo
+
+__all__ = ["average_precision", "evaluate", "load_ground_truth", "normal_angle_deg", "si_mse"]
+
+
+def si_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
+    """Scale-invariant MSE of ``(3, H, W)`` images over ``mask (1, H, W)`` (bool)."""
+    m = mask.expand_as(pred)
+    p, g = pred[m].double(), target[m].double()
+    if p.numel() == 0:
+        raise ValueError("si_mse: empty mask")
+    alpha = float((p * g).sum() / (p * p).sum().clamp_min(1e-12))
+    return float(((alpha * p - g) ** 2).mean())
+
+
+def normal_angle_deg(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
+    """Mean angle in degrees between ``(3, H, W)`` unit normals over ``mask (1, H, W)``."""
+    cos = (F.normalize(pred.double(), dim=0) * F.normalize(target.double(), dim=0)).sum(0, keepdim=True)
+    ang = torch.rad2deg(torch.acos(cos.clamp(-1.0, 1.0)))[mask]
+    if ang.numel() == 0:
+        raise ValueError("normal_angle_deg: empty mask")
+    return float(ang.mean())
+
+
+def average_precision(scores: np.ndarray, labels: np.ndarray) -> float:
+    """Average precision ``sum_n (R_n - R_{n-1}) P_n`` over distinct score thresholds.
+
+    Tied scores form one threshold, so a constant score gives the positive rate.
+    """
+    scores, labels = np.asarray(scores, dtype=np.float64).ravel(), np.asarray(labels, dtype=bool).ravel()
+    if scores.shape != labels.shape:
+        raise ValueError(f"scores {scores.shape} and labels {labels.shape} differ")
+    npos = int(labels.sum())
+    if npos == 0:
+        return float("nan")
+    order = np.argsort(-scores, kind="mergesort")
+    s, y = scores[order], labels[order]
+    tp, fp = np.cumsum(y), np.cumsum(~y)
+    last = np.r_[np.nonzero(np.diff(s))[0], s.size - 1]  # last index of each distinct score
+    precision = tp[last] / (tp[last] + fp[last])
+    recall = tp[last] / npos
+    return float(np.sum(np.diff(np.r_[0.0, recall]) * precision))
+
+
+def _lighting_errors(pred: torch.Tensor, gt: torch.Tensor) -> tuple[float, float]:
+    p, g = pred.double().reshape(-1), gt.double().reshape(-1)
+    raw = float((p - g).norm() / g.norm())
+    alpha = float((p @ g) / (p @ p).clamp_min(1e-30))
+    return raw, float((alpha * p - g).norm() / g.norm())
+
+
+def load_ground_truth(ds: SynthDataset, scene: str, view: int, light: int, res: int) -> dict[str, torch.Tensor]:
+    """Ground truth of one photo at ``res``: albedo, normals, shadow, lighting in photo units."""
+    gt = ds.load(scene, view, light, keys=("albedo", "normal", "shadow", "sh", "photo_params"))
+    albedo, normal, shadow = to_chw(gt["albedo"]), to_chw(gt["normal"]), to_chw(gt["shadow"])
+    if albedo.shape[-1] != res:
+        albedo = F.interpolate(albedo[None], size=(res, res), mode="area")[0]
+        shadow = F.interpolate(shadow[None], size=(res, res), mode="area")[0]
+        normal = F.interpolate(normal[None], size=(res, res), mode="nearest")[0]
+    params = gt["photo_params"]
+    gain = 2.0 ** params["ev"] * np.asarray(params["wb_gains"], dtype=np.float64)
+    lighting = torch.from_numpy(gt["sh"]["2"] * gain[None, :])
+    return {"albedo": albedo, "normal": normal, "shadow": shadow, "lighting": lighting}
+
+
+def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.Tensor]], root: str | Path,
+             split: str, res: int, prior: LightingPrior, max_images: int | None = None,
+             shadow_fn: Callable[[dict[str, torch.Tensor]], torch.Tensor] | None = None,
+             batch_size: int = 16) -> dict[str, float]:
+    """Metrics of a decomposition on a dataset split, with the trivial baselines.
+
+    Args:
+        decompose: ``(image (B, 3, H, W), sky (B, 1, H, W) bool) -> {"albedo", "normals",
+            "shadow", "lighting" (B, 9, 3)}``.
+        root, split: dataset and split (held-out scenes).
+        res: resolution the network runs at.
+        prior: gives the lighting baseline (its mean).
+        max_images: evaluate at most this many photos (evenly spread), None = all.
+        shadow_fn: optional second shadow predictor (ShadowNet) on the decomposition;
+            reported as ``shadownet_ap``.
+
+    Returns:
+        Flat dict: ``albedo_si_mse``, ``normal_mae_deg``, ``shadow_ap``,
+        ``lighting_rel_err``, ``lighting_si_rel_err``, the same with ``baseline_``
+        prefixed, ``shadow_positive_rate``, ``images``.
+    """
+    ds = SynthDataset(root, split=split, mode="full")
+    items = ds.items
+    if not items:
+        raise ValueError(f"{str(root)!r} has no photos in split {split!r}")
+    if max_images is not None and len(items) > max_images:
+        idx = np.linspace(0, len(items) - 1, max_images).round().astype(int)
+        items = [items[i] for i in idx]
+    mean_light = prior.mean.reshape(-1, 3).double()
+    acc: dict[str, list[float]] = {k: [] for k in (
+        "albedo_si_mse", "normal_mae_deg", "lighting_rel_err", "lighting_si_rel_err", "baseline_albedo_si_mse",
+        "baseline_normal_mae_deg", "baseline_lighting_rel_err", "baseline_lighting_si_rel_err")}
+    scores, scores_sn, labels = [], [], []
+    for start in range(0, len(items), batch_size):
+        chunk = items[start:start + batch_size]
+        photos = [load_photo(ds, it.scene, it.view, it.light, res) for it in chunk]
+        image = torch.stack([p["image"] for p in photos])
+        sky = torch.stack([p["sky"] for p in photos])
+        with torch.no_grad():
+            out = decompose(image, sky)
+            sn = shadow_fn(out) if shadow_fn is not None else None
+        for j, it in enumerate(chunk):
+            gt = load_ground_truth(ds, it.scene, it.view, it.light, res)
+            fg = ~sky[j] & (gt["normal"].norm(dim=0, keepdim=True) > 0.5)
+            if int(fg.sum()) == 0:
+                continue
+            acc["albedo_si_mse"].append(si_mse(out["albedo"][j], gt["albedo"], fg))
+            acc["baseline_albedo_si_mse"].append(si_mse(image[j], gt["albedo"], fg))
+            acc["normal_mae_deg"].append(normal_angle_deg(out["normals"][j], gt["normal"], fg))
+            flat = torch.zeros_like(gt["normal"])
+            flat[2] = 1.0
+            acc["baseline_normal_mae_deg"].append(normal_angle_deg(flat, gt["normal"], fg))
+            for name, light in (("", out["lighting"][j]), ("baseline_", mean_light)):
+                raw, si = _lighting_errors(light, gt["lighting"])
+                acc[f"{name}lighting_rel_err"].append(raw)
+                acc[f"{name}lighting_si_rel_err"].append(si)
+            labels.append((gt["shadow"][fg] < 0.5).numpy())
+            scores.append((1.0 - out["shadow"][j][fg]).numpy())
+            if sn is not None:
+                scores_sn.append((1.0 - sn[j][fg]).numpy())
+    res_: dict[str, float] = {k: float(np.mean(v)) if v else math.nan for k, v in acc.items()}
+    y = np.concatenate(labels)
+    res_["shadow_ap"] = average_precision(np.concatenate(scores), y)
+    res_["baseline_shadow_ap"] = average_precision(np.zeros(y.size), y)
+    res_["shadow_positive_rate"] = float(y.mean())
+    if scores_sn:
+        res_["shadownet_ap"] = average_precision(np.concatenate(scores_sn), y)
+    res_["images"] = float(len(acc["albedo_si_mse"]))
+    return res_

@@ -1,0 +1,170 @@
+"""Networks of the paper's first stage: the inverse rendering UNet and ShadowNet.
+
+Both are small UNets with GroupNorm (never BatchNorm: the original ShadowNet ran its
+BatchNorm in training mode at test time, so its output depended on the batch). GroupNorm
+normalises each image on its own, so a network behaves the same in ``train()`` and
+``eval()`` and for any batch size.
+
+Shapes: images ``(B, C, H, W)``; any ``H, W`` works (inputs are padded to a multiple of
+``2 ** depth`` by reflection and the outputs cropped back).
+
+* :class:`InverseNet`: linear image ``(B, 3, H, W)`` -> albedo ``(B, 3, H, W)`` in [0, 1]
+  (sigmoid), normals ``(B, 3, H, W)`` unit, camera frame, ``n_z > 0`` (facing the
+  camera), shadow ``(B, 1, H, W)`` in [0, 1] (sigmoid, 1 = unshadowed).
+* :class:`ShadowNet`: normals ``(B, 3, H, W)`` + lighting ``(B, 9, 3)`` tiled per pixel
+  (30 channels) -> shadow ``(B, 1, H, W)`` in [0, 1].
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+__all__ = ["UNet", "InverseNet", "ShadowNet", "count_parameters", "normalise_lighting", "tile_lighting"]
+
+
+def _groups(channels: int) -> int:
+    """Largest group count <= 8 dividing ``channels`` (GroupNorm needs a divisor)."""
+    for g in (8, 4, 2, 1):
+        if channels % g == 0:
+            return g
+    return 1
+
+
+class _Block(nn.Sequential):
+    """Two 3x3 convolutions, each followed by GroupNorm and ReLU."""
+
+    def __init__(self, cin: int, cout: int) -> None:
+        super().__init__(
+            nn.Conv2d(cin, cout, 3, padding=1, bias=False), nn.GroupNorm(_groups(cout), cout), nn.ReLU(inplace=True),
+            nn.Conv2d(cout, cout, 3, padding=1, bias=False), nn.GroupNorm(_groups(cout), cout), nn.ReLU(inplace=True),
+        )
+
+
+class UNet(nn.Module):
+    """A small UNet: ``depth`` stride-2 levels, channels ``width * 2**level``.
+
+    Args:
+        in_channels: input channels.
+        out_channels: output channels (a 1x1 convolution, no activation).
+        width: channels of the first level (the knob the width chart measures).
+        depth: number of downsamplings.
+    """
+
+    def __init__(self, in_channels: int, out_channels: int, width: int = 16, depth: int = 3) -> None:
+        super().__init__()
+        if not (isinstance(width, int) and width >= 1):
+            raise ValueError(f"width must be a positive integer, got {width!r}")
+        if not (isinstance(depth, int) and 1 <= depth <= 6):
+            raise ValueError(f"depth must be an integer in [1, 6], got {depth!r}")
+        self.depth = depth
+        chans = [width * 2**i for i in range(depth + 1)]
+        self.inc = _Block(in_channels, chans[0])
+        self.down = nn.ModuleList(
+            nn.Sequential(nn.Conv2d(chans[i], chans[i], 3, stride=2, padding=1, bias=False),
+                          nn.GroupNorm(_groups(chans[i]), chans[i]), nn.ReLU(inplace=True),
+                          _Block(chans[i], chans[i + 1]))
+            for i in range(depth))
+        self.up = nn.ModuleList(_Block(chans[i + 1] + chans[i], chans[i]) for i in reversed(range(depth)))
+        self.head = nn.Conv2d(chans[0], out_channels, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B, in, H, W)`` -> ``(B, out, H, W)``."""
+        h, w = x.shape[-2:]
+        m = 2**self.depth
+        ph, pw = (-h) % m, (-w) % m
+        if ph or pw:
+            # Reflection needs pad < size; replicate covers tiny inputs.
+            mode = "reflect" if ph < h and pw < w else "replicate"
+            x = F.pad(x, (0, pw, 0, ph), mode=mode)
+        skips = [self.inc(x)]
+        for d in self.down:
+            skips.append(d(skips[-1]))
+        y = skips.pop()
+        for u in self.up:
+            s = skips.pop()
+            y = u(torch.cat([F.interpolate(y, size=s.shape[-2:], mode="bilinear", align_corners=False), s], 1))
+        return self.head(y)[..., :h, :w]
+
+
+def _check_input(x: torch.Tensor, channels: int, name: str) -> None:
+    if not isinstance(x, torch.Tensor) or x.ndim != 4 or x.shape[1] != channels:
+        shape = tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
+        raise ValueError(f"{name} must be a torch tensor of shape (B, {channels}, H, W), got {shape}")
+
+
+class InverseNet(nn.Module):
+    """Image -> albedo, normals, shadow (the paper's InverseRenderNet variant, lighting solved outside).
+
+    Args:
+        width: UNet width (first-level channels).
+        depth: UNet depth.
+    """
+
+    def __init__(self, width: int = 16, depth: int = 3) -> None:
+        super().__init__()
+        self.width, self.depth = width, depth
+        self.unet = UNet(3, 7, width, depth)
+        with torch.no_grad():
+            # Start from a plausible decomposition: mid-grey albedo, camera-facing
+            # normals, no shadow (sigmoid(3) = 0.95).
+            self.unet.head.bias.copy_(torch.tensor([0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 3.0]))
+
+    def forward(self, image: torch.Tensor) -> dict[str, torch.Tensor]:
+        """``image (B, 3, H, W)`` linear RGB -> ``{"albedo", "normals", "shadow"}``."""
+        _check_input(image, 3, "image")
+        # log compresses the photo's dynamic range (shadows vs sunlit) for the network.
+        x = torch.log(image.clamp_min(0) + 1e-2) - math.log(0.2)
+        out = self.unet(x)
+        albedo = torch.sigmoid(out[:, 0:3])
+        # n_z = softplus > 0: normals face the camera; normalised to unit length.
+        raw = torch.cat([out[:, 3:5], F.softplus(out[:, 5:6]) + 1e-4], 1)
+        normals = raw / raw.norm(dim=1, keepdim=True)
+        shadow = torch.sigmoid(out[:, 6:7])
+        return {"albedo": albedo, "normals": normals, "shadow": shadow}
+
+
+def normalise_lighting(lighting: torch.Tensor) -> torch.Tensor:
+    """``(B, 9, 3)`` -> ``(B, 9, 3)`` divided by the DC term's RGB norm.
+
+    Shadows do not depend on the lighting's overall brightness, so ShadowNet sees the
+    lighting's shape only; the same deterministic normalisation at training and
+    inference time (no batch statistics).
+    """
+    if lighting.ndim != 3 or lighting.shape[-1] != 3:
+        raise ValueError(f"lighting must have shape (B, K, 3), got {tuple(lighting.shape)}")
+    dc = lighting[:, :1, :].norm(dim=-1, keepdim=True).clamp_min(1e-6)
+    return lighting / dc
+
+
+def tile_lighting(normals: torch.Tensor, lighting: torch.Tensor) -> torch.Tensor:
+    """Normals ``(B, 3, H, W)`` + lighting ``(B, 9, 3)`` -> ``(B, 30, H, W)`` (27-D lighting tiled)."""
+    _check_input(normals, 3, "normals")
+    if lighting.shape != (normals.shape[0], 9, 3):
+        raise ValueError(f"lighting must have shape ({normals.shape[0]}, 9, 3), got {tuple(lighting.shape)}")
+    b, _, h, w = normals.shape
+    flat = normalise_lighting(lighting).reshape(b, 27, 1, 1).expand(b, 27, h, w)
+    return torch.cat([normals, flat.to(normals.dtype)], 1)
+
+
+class ShadowNet(nn.Module):
+    """Normals + target lighting -> shadow map (30 input channels, GroupNorm, sigmoid output)."""
+
+    def __init__(self, width: int = 16, depth: int = 3) -> None:
+        super().__init__()
+        self.width, self.depth = width, depth
+        self.unet = UNet(30, 1, width, depth)
+        with torch.no_grad():
+            self.unet.head.bias.fill_(3.0)
+
+    def forward(self, normals: torch.Tensor, lighting: torch.Tensor) -> torch.Tensor:
+        """``normals (B, 3, H, W)``, ``lighting (B, 9, 3)`` camera-frame SH -> ``(B, 1, H, W)``."""
+        return torch.sigmoid(self.unet(tile_lighting(normals, lighting)))
+
+
+def count_parameters(model: nn.Module) -> int:
+    """Number of trainable parameters."""
+    return sum(p.numel() for p in model.parameters() if p.requires_grad)

@@ -1,0 +1,158 @@
+"""The inverse network's self-supervised objective, composed from :mod:`physrelight.losses`.
+
+For a batch of photo pairs (a, b) of one scene (:class:`learned.data.Batch`), the
+network decomposes all ``2B`` photos; the lighting of each is *solved*
+(:func:`physrelight.image_model.solve_lighting` over non-sky pixels, shadow divided out;
+differentiable) and projected onto the outdoor lighting subspace
+(:class:`physrelight.lighting_prior.LightingPrior`). Terms (no ground truth anywhere):
+
+``appearance``
+    the paper's shadow-free loss ``|| min(1, i / s) - albedo * shading(n; L) ||^2`` on
+    non-sky pixels, with the projected lighting.
+``albedo``
+    albedo consistency: albedo of a vs albedo of b warped into a with a's MVS depth
+    and the relative pose (occlusion-tested against b's MVS depth), squared error after
+    scaling b's per channel onto a's (exposure and white balance differ between photos).
+``normal``
+    normal supervision: squared distance to the normals of the MVS-like depth where
+    they are valid (depth edges and holes excluded).
+``cross``
+    cross-rendering: a's albedo and normals lit by b's lighting rotated into a's frame
+    (``D(R_a R_b^T) L_b``) against b's photo warped into a, shadow-free with b's shadow
+    warped into a (:func:`physrelight.losses.cross_rendering_loss`).
+``prior``
+    lighting prior: mean squared whitened coordinates of the solved lighting.
+``shadow``
+    a small sparsity term ``mean(1 - s)`` on non-sky pixels (our addition: without it
+    ``min(1, i / s)`` lets the shadow explain the whole image, ``s -> 0``, target 1).
+
+Every term is symmetric in the pair (computed for a <- b and b <- a).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+
+from physrelight import camera, image_model, losses
+from physrelight.lighting_prior import LightingPrior
+
+from .data import Batch, mvs_normals
+
+__all__ = ["LossWeights", "decompose_and_solve", "inverse_losses", "solve_projected"]
+
+
+@dataclass(frozen=True)
+class LossWeights:
+    """Weights of the self-supervised terms (the total is their weighted sum)."""
+
+    appearance: float = 10.0
+    albedo: float = 1.0
+    normal: float = 0.5
+    cross: float = 5.0
+    prior: float = 1e-3
+    shadow: float = 1e-2
+
+    def as_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+def solve_projected(image: torch.Tensor, albedo: torch.Tensor, normals: torch.Tensor, shadow: torch.Tensor,
+                    foreground: torch.Tensor, prior: LightingPrior) -> tuple[torch.Tensor, torch.Tensor]:
+    """Solve the lighting over ``foreground`` and project it onto the prior's subspace.
+
+    Args:
+        image, albedo, normals: ``(B, 3, H, W)``; shadow, foreground ``(B, 1, H, W)``.
+
+    Returns:
+        ``(solved, projected)``, each ``(B, 9, 3)`` camera-frame radiance SH; both carry
+        gradients to every input.
+    """
+    solved = image_model.solve_lighting(image, albedo, normals, foreground.to(image.dtype), shadow)
+    return solved, prior.project(solved)
+
+
+def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Tensor,
+                        prior: LightingPrior) -> dict[str, torch.Tensor]:
+    """Run the network and solve each photo's lighting.
+
+    Args:
+        net: an :class:`learned.networks.InverseNet` (or a DDP wrapper of one).
+        image: ``(B, 3, H, W)`` linear photos; sky ``(B, 1, H, W)`` bool.
+
+    Returns:
+        ``albedo, normals, shadow`` as the network gives them, ``lighting_solved`` and
+        ``lighting`` (projected) ``(B, 9, 3)``, ``foreground`` ``(B, 1, H, W)`` float.
+    """
+    out = dict(net(image))
+    fg = (~sky).to(image.dtype)
+    out["lighting_solved"], out["lighting"] = solve_projected(image, out["albedo"], out["normals"], out["shadow"],
+                                                              fg, prior)
+    out["foreground"] = fg
+    return out
+
+
+def _match_scale(x: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """``x (B, C, H, W)`` times its per-image, per-channel least-squares scale onto ``target`` over ``mask``.
+
+    Two photos of a scene differ in exposure and white balance, which one photo cannot
+    reveal; comparing albedos up to a per-channel scale keeps the consistency term from
+    rewarding flat (low-contrast) albedo as the safest guess.
+    """
+    num = (x * target * mask).sum((2, 3), keepdim=True)
+    den = (x * x * mask).sum((2, 3), keepdim=True)
+    scale = torch.where(den > 1e-8, num / den.clamp_min(1e-8), torch.ones_like(den))
+    return x * scale
+
+
+def _masked(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """``masked_mean_sq`` that gives 0 (with a graph) for an empty mask instead of raising."""
+    if float(mask.sum()) <= 0:
+        return x.sum() * 0.0
+    return losses.masked_mean_sq(x, mask)
+
+
+def inverse_losses(net: torch.nn.Module, batch: Batch, prior: LightingPrior,
+                   weights: LossWeights = LossWeights()) -> tuple[torch.Tensor, dict[str, float], dict[str, torch.Tensor]]:
+    """The weighted self-supervised loss of a batch.
+
+    Returns:
+        ``(total, terms, outputs)``: the scalar to minimise, each unweighted term as a
+        float, and the decomposition (see :func:`decompose_and_solve`).
+    """
+    image, sky = batch.image, batch.sky
+    out = decompose_and_solve(net, image, sky, prior)
+    fg = out["foreground"]
+    albedo, normals, shadow = out["albedo"], out["normals"], out["shadow"]
+
+    terms: dict[str, torch.Tensor] = {}
+    terms["appearance"] = losses.shadow_free_loss(image, shadow, albedo, normals, out["lighting"], fg)
+
+    # Warp every photo's partner into it: dst = row i, src = partner of row i.
+    T_src = batch.partner(batch.world_to_camera)
+    dst_to_src = camera.relative_pose(batch.world_to_camera, T_src)
+    src = torch.cat([batch.partner(image), batch.partner(albedo), batch.partner(shadow)], 1)
+    warped, valid = camera.warp(src, batch.depth, batch.K, batch.partner(batch.K), dst_to_src,
+                                depth_src=batch.partner(batch.depth))
+    # The occlusion test against the partner's MVS depth already rejects its sky and holes.
+    overlap = (valid & ~sky).to(image.dtype)
+    image_w, albedo_w, shadow_w = warped[:, 0:3], warped[:, 3:6], warped[:, 6:7]
+    terms["albedo"] = _masked(albedo - _match_scale(albedo_w, albedo, overlap), overlap)
+
+    n_mvs, n_valid = mvs_normals(batch)
+    terms["normal"] = _masked(normals - n_mvs, n_valid.to(image.dtype))
+
+    # Lighting of the partner (its camera frame) rotated into this view: R_dst R_src^T.
+    src_to_dst = camera.relative_pose(T_src, batch.world_to_camera)[:, :3, :3]
+    if float(overlap.sum()) > 0:
+        terms["cross"] = losses.cross_rendering_loss(image_w, shadow_w.clamp(0.0, 1.0), albedo, normals,
+                                                     batch.partner(out["lighting"]), src_to_dst, overlap)
+    else:
+        terms["cross"] = image.sum() * 0.0
+    terms["prior"] = prior.loss(out["lighting_solved"])
+    terms["shadow"] = ((1.0 - shadow) * fg).sum() / fg.sum().clamp_min(1.0)
+
+    w = weights.as_dict()
+    total = sum(w[k] * v for k, v in terms.items())
+    return total, {k: float(v.detach()) for k, v in terms.items()}, out

@@ -1,0 +1,210 @@
+"""Inference: decompose a photo and relight it (first stage; the neural renderer comes later).
+
+``Relighter.load()`` reads the weights shipped in ``learned/weights`` (safetensors, no
+network access needed). ``decompose(image)`` gives albedo, normals (camera frame),
+shadow and the solved, prior-projected SH lighting (camera frame); ``relight(image,
+target)`` renders the Lambertian SH relighting ``albedo * shading(n; L_target) *
+ShadowNet(n, L_target)`` and keeps the photo's sky.
+
+Images: a photo as numpy ``(H, W, 3)`` (uint8, or float display values in [0, 1]) or torch
+``(3, H, W)`` / ``(B, 3, H, W)`` float display values; it is linearised with the sRGB
+curve. Results come back as the type given: numpy ``(H, W, C)`` or torch
+``(B, C, H, W)`` (``(C, H, W)`` for an unbatched torch image). Lighting is ``(9, 3)``
+radiance SH (``(B, 9, 3)`` for a batch).
+
+Targets: SH coefficients ``(9, 3)``, an environment map (array ``(H, 2H, 3)`` or an EXR
+path) or a sun direction ``(3,)`` (a white sun plus a uniform fill sky), all in the *world* frame (Y up), rotated into the camera with ``world_to_camera``
+(``(4, 4)`` or its ``(3, 3)`` rotation); without it the camera is assumed level and
+looking along world -Z (camera frame = world frame).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from physrelight import colour, image_model, sh
+from physrelight.lighting_prior import LightingPrior
+
+from . import checkpoint as ckpt
+from .lighting import WEIGHTS_DIR, load_prior
+from .networks import InverseNet, ShadowNet
+from .objectives import decompose_and_solve
+
+__all__ = ["Relighter"]
+
+
+def _as_image(image: Any) -> tuple[torch.Tensor, str]:
+    """Photo -> ``(B, 3, H, W)`` linear float32 and how to give results back ("numpy", "chw", "bchw")."""
+    if isinstance(image, np.ndarray):
+        if image.ndim != 3 or image.shape[-1] != 3:
+            raise ValueError(f"a numpy image must have shape (H, W, 3), got {image.shape}")
+        t = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None]
+        kind = "numpy"
+    elif isinstance(image, torch.Tensor):
+        if image.ndim == 3:
+            t, kind = image[None], "chw"
+        elif image.ndim == 4:
+            t, kind = image, "bchw"
+        else:
+            raise ValueError(f"a torch image must have shape (3, H, W) or (B, 3, H, W), got {tuple(image.shape)}")
+        if t.shape[1] != 3:
+            raise ValueError(f"a torch image must have 3 channels, got shape {tuple(image.shape)}")
+    else:
+        raise ValueError(f"image must be a numpy array or torch tensor, got {type(image).__name__}")
+    if t.shape[-1] < 8 or t.shape[-2] < 8:
+        raise ValueError(f"image must be at least 8x8 pixels, got {tuple(t.shape[-2:])}")
+    if t.dtype in (torch.uint8,):
+        t = t.float() / 255.0
+    elif not t.is_floating_point():
+        raise ValueError(f"image must be uint8 or float display values in [0, 1], got dtype {t.dtype}")
+    lin = colour.from_ldr(t.detach().float().cpu())  # raises on NaN or values outside [0, 1]
+    return lin, kind
+
+
+def _give_back(x: torch.Tensor, kind: str) -> Any:
+    if kind == "numpy":
+        return x[0].permute(1, 2, 0).numpy()
+    return x[0] if kind == "chw" else x
+
+
+def _as_mask(mask: Any, like: torch.Tensor) -> torch.Tensor:
+    b, _, h, w = like.shape
+    if mask is None:
+        return torch.zeros(b, 1, h, w, dtype=torch.bool)
+    m = torch.as_tensor(np.asarray(mask) if not isinstance(mask, torch.Tensor) else mask)
+    if m.ndim == 2:
+        m = m[None, None]
+    elif m.ndim == 3:
+        m = m[:, None] if m.shape[0] == b and m.shape[1:] == (h, w) else m[None]
+    if m.shape != (b, 1, h, w):
+        raise ValueError(f"sky_mask must have shape (H, W) = ({h}, {w}) or (B, 1, H, W), got {tuple(m.shape)}")
+    return m.bool() if m.dtype == torch.bool else m > 0.5
+
+
+def _rotation(world_to_camera: Any) -> torch.Tensor:
+    if world_to_camera is None:
+        return torch.eye(3, dtype=torch.float64)
+    r = torch.as_tensor(np.asarray(world_to_camera, dtype=np.float64) if not isinstance(world_to_camera, torch.Tensor)
+                        else world_to_camera.double())
+    if r.shape == (4, 4):
+        r = r[:3, :3]
+    if r.shape != (3, 3):
+        raise ValueError(f"world_to_camera must have shape (4, 4) or (3, 3), got {tuple(r.shape)}")
+    if not torch.allclose(r @ r.T, torch.eye(3, dtype=torch.float64), atol=1e-4) or float(torch.det(r)) <= 0:
+        raise ValueError("world_to_camera's rotation block must be a proper rotation")
+    return r
+
+
+class Relighter:
+    """The first stage at inference: inverse network + lighting solve + ShadowNet.
+
+    Use :meth:`load`; the constructor takes ready modules.
+    """
+
+    def __init__(self, inverse: InverseNet, shadow_net: ShadowNet, prior: LightingPrior, res: int = 64) -> None:
+        self.inverse, self.shadow_net, self.prior, self.res = inverse.eval(), shadow_net.eval(), prior, res
+
+    @classmethod
+    def load(cls, path: str | os.PathLike | None = None) -> "Relighter":
+        """Load ``inverse.safetensors``, ``shadow.safetensors`` and ``lighting_prior.npz``
+        from ``path`` (a folder; None = the weights shipped in the package)."""
+        d = Path(path) if path is not None else WEIGHTS_DIR
+        if not d.is_dir():
+            raise FileNotFoundError(f"no weights folder at {str(d)!r}")
+        inv_t, inv_m = ckpt.load_weights(d / "inverse.safetensors")
+        sh_t, sh_m = ckpt.load_weights(d / "shadow.safetensors")
+        if inv_m.get("kind") != "inverse" or sh_m.get("kind") != "shadow":
+            raise ValueError(f"{str(d)!r} does not hold inverse + shadow weights")
+        inverse = InverseNet(int(inv_m["width"]), int(inv_m["depth"]))
+        inverse.load_state_dict(inv_t)
+        shadow = ShadowNet(int(sh_m["width"]), int(sh_m["depth"]))
+        shadow.load_state_dict(sh_t)
+        return cls(inverse, shadow, load_prior(d / "lighting_prior.npz"), int(inv_m.get("res", 64)))
+
+    @torch.no_grad()
+    def decompose_linear(self, image: torch.Tensor, sky: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Tensors in, tensors out: ``image (B, 3, H, W)`` linear, ``sky (B, 1, H, W)`` bool ->
+        ``albedo, normals, shadow, lighting (B, 9, 3), lighting_solved, foreground``."""
+        return decompose_and_solve(self.inverse, image, sky, self.prior)
+
+    def decompose(self, image: Any, sky_mask: Any = None) -> dict[str, Any]:
+        """Albedo ``(.., 3)``, normals ``(.., 3)`` (camera frame), shadow ``(.., 1)``, lighting
+        ``(9, 3)`` (camera-frame radiance SH in the linearised photo's units) and the sky
+        mask ``(.., 1)`` (all False when none is given: every pixel is then used for the solve).
+        """
+        lin, kind = _as_image(image)
+        sky = _as_mask(sky_mask, lin)
+        out = self.decompose_linear(lin, sky)
+        light = out["lighting"] if kind == "bchw" else out["lighting"][0]
+        result = {k: _give_back(out[k], kind) for k in ("albedo", "normals", "shadow")}
+        result["lighting"] = light.numpy() if kind == "numpy" else light
+        result["sky_mask"] = _give_back(sky, kind)
+        return result
+
+    def target_lighting(self, target: Any, world_to_camera: Any = None) -> torch.Tensor:
+        """``(9, 3)`` camera-frame radiance SH of a target (SH ``(9, 3)``, env map or EXR path, or a sun
+        direction ``(3,)`` towards the sun; all in the world frame)."""
+        if isinstance(target, (str, os.PathLike)):
+            from physrelight import envmap
+
+            target = envmap.read(target)
+        t = torch.as_tensor(np.asarray(target, dtype=np.float64) if not isinstance(target, torch.Tensor)
+                            else target.double())
+        if t.shape == (3,):
+            # A sun direction: a white delta sun (irradiance 1) over a uniform sky that adds
+            # 30 % of the sun's irradiance on a horizontal surface (soft fill light).
+            norm = float(t.norm())
+            if not norm > 0:
+                raise ValueError("a sun direction target must be a non-zero (3,) vector")
+            coeffs = torch.as_tensor(sh.project_sun((t / norm).numpy(), np.ones(3), order=2))
+            coeffs[0] += (0.3 / math.pi) * 2.0 * math.sqrt(math.pi)  # uniform L: E_up = pi L, L00 = 2 sqrt(pi) L
+        elif t.ndim == 2 and t.shape == (9, 3):
+            coeffs = t
+        elif t.ndim == 3 and t.shape[-1] == 3 and t.shape[1] == 2 * t.shape[0]:
+            coeffs = torch.as_tensor(sh.project_envmap(t.numpy(), order=2))
+        else:
+            raise ValueError(f"target must be SH coefficients (9, 3), an env map (H, 2H, 3) or a sun direction (3,), "
+                             f"got {tuple(t.shape)}")
+        if not torch.isfinite(coeffs).all():
+            raise ValueError("target holds NaN or inf")
+        return torch.as_tensor(sh.rotate(coeffs, _rotation(world_to_camera)))
+
+    def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
+                keep_exposure: bool = True) -> Any:
+        """Lambertian SH relighting with ShadowNet's shadow for the target lighting.
+
+        Args:
+            image: the photo (see the module doc).
+            target: SH ``(9, 3)``, env map ``(H, 2H, 3)``, EXR path or sun direction ``(3,)``, world frame.
+            world_to_camera: ``(4, 4)`` or ``(3, 3)``; None = level camera (camera = world frame).
+            sky_mask: optional ``(H, W)`` bool, True on sky (kept from the photo).
+            keep_exposure: scale the target so its DC luminance equals the source
+                lighting's (the photo keeps its exposure; only the lighting's shape changes).
+
+        Returns:
+            The relit photo as display values in [0, 1] (sRGB), type and layout of ``image``.
+        """
+        lin, kind = _as_image(image)
+        sky = _as_mask(sky_mask, lin)
+        with torch.no_grad():
+            out = self.decompose_linear(lin, sky)
+            target_cam = self.target_lighting(target, world_to_camera).float()
+            tgt = target_cam[None].expand(lin.shape[0], -1, -1).clone()
+            if keep_exposure:
+                lum = torch.tensor([0.2126, 0.7152, 0.0722])
+                src_dc = (out["lighting"][:, 0] * lum).sum(-1)
+                tgt_dc = (tgt[:, 0] * lum).sum(-1)
+                if bool((tgt_dc <= 0).any()):
+                    raise ValueError("target lighting has no positive DC term (a dark or invalid target)")
+                tgt = tgt * (src_dc / tgt_dc).clamp_min(0)[:, None, None]
+            s = self.shadow_net(out["normals"], tgt)
+            relit = image_model.render(out["albedo"], out["normals"], tgt, s)
+            relit = torch.where(sky, lin, relit)
+            ldr = colour.to_ldr(relit.clamp_min(0))
+        return _give_back(ldr, kind)

@@ -1,0 +1,356 @@
+"""Training loops of the first stage: the inverse network and ShadowNet.
+
+``physrelight train inverse --data DIR --out RUN`` and ``physrelight train shadow --data DIR
+--out RUN --inverse RUN_OR_WEIGHTS`` (see :mod:`learned.cli`). Both loops are
+
+* **seeded**: the model is initialised from ``torch.manual_seed(seed)``; batch ``t`` of
+  rank ``r`` is a pure function of ``(seed, t, r)`` (:class:`learned.data.PairSampler`);
+* **resumable to the same numbers**: a checkpoint (model, Adam state, RNG state in
+  safetensors + a JSON sidecar) every ``ckpt_every`` steps; restarting the same command
+  loads the latest one, truncates ``train.csv`` to it and continues: the parameters,
+  optimizer state and every later loss are bit-identical to an uninterrupted run
+  (``tests/learned``);
+* **logged**: ``train.csv`` (every ``log_every`` steps), ``val.csv`` (every ``val_every``
+  steps, held-out scenes against ground truth: :mod:`learned.evaluate`), TensorBoard
+  events in ``RUN/tb``, PNG panels of the layers in ``RUN/panels``, a progress bar;
+* **distributed** when ``WORLD_SIZE`` is set (``torchrun --nproc_per_node 2 ...``):
+  ``torch.distributed`` with gloo, DDP gradient averaging, each rank its own batches,
+  rank 0 writes logs and checkpoints.
+
+The self-supervised loader never hands out ground truth; ground truth is read only by
+the validation (``mode="full"``) on the validation split (or ``--val-data``).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.distributed as dist
+
+from physrelight import colour, image_model, io
+
+from . import checkpoint as ckpt
+from .data import PairSampler
+from .evaluate import evaluate
+from .lighting import load_prior
+from .networks import InverseNet, ShadowNet, count_parameters
+from .objectives import LossWeights, decompose_and_solve, inverse_losses
+
+__all__ = ["TrainConfig", "build_inverse", "load_inverse", "train"]
+
+STAGES = ("inverse", "shadow")
+
+
+@dataclass
+class TrainConfig:
+    """Everything that determines a run (recorded in every checkpoint)."""
+
+    stage: str
+    data: str
+    out: str
+    val_data: str | None = None
+    val_split: str = "val"
+    train_split: str = "train"
+    width: int = 16
+    depth: int = 3
+    res: int = 64
+    batch: int = 4
+    steps: int = 2000
+    lr: float = 1e-3
+    seed: int = 0
+    val_every: int = 250
+    val_images: int = 96
+    ckpt_every: int = 250
+    log_every: int = 10
+    threads: int = 2
+    prior: str | None = None
+    inverse: str | None = None
+    weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if self.stage not in STAGES:
+            raise ValueError(f"stage must be one of {STAGES}, got {self.stage!r}")
+        for name in ("width", "depth", "res", "batch", "steps", "val_every", "val_images", "ckpt_every",
+                     "log_every", "threads"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if not (math.isfinite(self.lr) and self.lr > 0):
+            raise ValueError(f"lr must be a positive number, got {self.lr!r}")
+        if not Path(self.data, "manifest.json").is_file():
+            raise ValueError(f"{self.data!r} is not a dataset folder (no manifest.json)")
+        if self.stage == "shadow" and self.inverse is None:
+            raise ValueError("the shadow stage needs --inverse (an inverse run folder or weights file)")
+        unknown = set(self.weights) - set(LossWeights().as_dict())
+        if unknown:
+            raise ValueError(f"unknown loss weights {sorted(unknown)}")
+
+    def identity(self) -> dict[str, Any]:
+        """The fields that must agree for a resume (not out/progress/steps/val/threads)."""
+        skip = {"out", "progress", "steps", "val_every", "val_images", "threads", "val_data", "val_split"}
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
+
+
+def build_inverse(width: int, depth: int, seed: int) -> InverseNet:
+    torch.manual_seed(seed)
+    return InverseNet(width, depth)
+
+
+def load_inverse(path: str | Path) -> InverseNet:
+    """An inverse network from a run folder (latest checkpoint) or an exported weights file."""
+    p = Path(path)
+    if p.is_dir():
+        side = ckpt.latest_checkpoint(p)
+        if side is None:
+            raise FileNotFoundError(f"no checkpoint in {str(p)!r}")
+        import json
+
+        cfg = json.loads(side.read_text())["config"]
+        net = InverseNet(cfg["width"], cfg["depth"])
+        ckpt.load_checkpoint(side, net, restore_rng=False)
+    else:
+        tensors, meta = ckpt.load_weights(p)
+        if meta.get("kind") != "inverse":
+            raise ValueError(f"{str(p)!r} holds {meta.get('kind')!r} weights, not an inverse network")
+        net = InverseNet(int(meta["width"]), int(meta["depth"]))
+        net.load_state_dict(tensors)
+    return net.eval()
+
+
+# ------------------------------------------------------------------------- distributed
+
+
+def _dist_setup() -> tuple[int, int]:
+    ws = int(os.environ.get("WORLD_SIZE", "1"))
+    if ws > 1 and not dist.is_initialized():
+        dist.init_process_group("gloo")
+    return (dist.get_rank(), dist.get_world_size()) if dist.is_initialized() else (0, 1)
+
+
+def _barrier() -> None:
+    if dist.is_initialized():
+        dist.barrier()
+
+
+def _mean_terms(terms: dict[str, float], world: int) -> dict[str, float]:
+    if world == 1:
+        return terms
+    keys = sorted(terms)
+    t = torch.tensor([terms[k] for k in keys], dtype=torch.float64)
+    dist.all_reduce(t)
+    return {k: float(v) / world for k, v in zip(keys, t)}
+
+
+def _rank_divergence(model: torch.nn.Module, world: int) -> float:
+    """Largest difference of any parameter between a rank and the mean over ranks (0 = in sync)."""
+    if world == 1:
+        return 0.0
+    flat = torch.cat([p.detach().reshape(-1).double() for p in model.parameters()])
+    mean = flat.clone()
+    dist.all_reduce(mean)
+    diff = (flat - mean / world).abs().max().reshape(1)
+    dist.all_reduce(diff, op=dist.ReduceOp.MAX)
+    return float(diff)
+
+
+# ------------------------------------------------------------------------- logs
+
+
+class _Logs:
+    """CSV and TensorBoard writers of rank 0; on resume the CSV keeps rows up to ``step``."""
+
+    def __init__(self, run: Path, start: int, enabled: bool) -> None:
+        self.run, self.enabled = run, enabled
+        self.tb = None
+        if not enabled:
+            return
+        for name in ("train.csv", "val.csv"):
+            path = run / name
+            if path.is_file():  # drop rows written after the checkpoint we resume from
+                rows = list(csv.reader(path.open()))
+                kept = [rows[0]] + [r for r in rows[1:] if int(r[0]) <= start]
+                with path.open("w", newline="") as f:
+                    csv.writer(f).writerows(kept)
+        try:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self.tb = SummaryWriter(str(run / "tb"), purge_step=start + 1)
+        except ImportError:  # tensorboard is optional: CSV always
+            self.tb = None
+
+    def write(self, name: str, step: int, values: dict[str, float]) -> None:
+        if not self.enabled:
+            return
+        path = self.run / name
+        header = ["step", *values.keys()]
+        new = not path.is_file()
+        with path.open("a", newline="") as f:
+            w = csv.writer(f)
+            if new:
+                w.writerow(header)
+            w.writerow([step, *(f"{v:.8g}" for v in values.values())])
+        if self.tb is not None:
+            group = name.split(".")[0]
+            for k, v in values.items():
+                self.tb.add_scalar(f"{group}/{k}", v, step)
+            self.tb.flush()
+
+    def close(self) -> None:
+        if self.tb is not None:
+            self.tb.close()
+
+
+def _ldr(x: torch.Tensor) -> np.ndarray:
+    """``(3, H, W)`` linear -> ``(H, W, 3)`` display values."""
+    return colour.to_ldr(x.detach().clamp_min(0)).permute(1, 2, 0).numpy()
+
+
+def write_panel(path: Path, image: torch.Tensor, out: dict[str, torch.Tensor], rows: int = 4) -> None:
+    """PNG grid, one row per photo: photo | albedo | normals | shadow | shading | re-render."""
+    tiles = []
+    for j in range(min(rows, image.shape[0])):
+        n = out["normals"][j]
+        shading = image_model.shading(n[None], out["lighting"][j][None])[0]
+        rerender = out["albedo"][j] * shading * out["shadow"][j]
+        row = [_ldr(image[j]), out["albedo"][j].permute(1, 2, 0).numpy() ** (1 / 2.2),
+               (n.permute(1, 2, 0).numpy() * 0.5 + 0.5), np.repeat(out["shadow"][j].permute(1, 2, 0).numpy(), 3, -1),
+               _ldr(shading), _ldr(rerender)]
+        if "shadow_net" in out:
+            row.append(np.repeat(out["shadow_net"][j].permute(1, 2, 0).numpy(), 3, -1))
+        tiles.append(np.concatenate(row, 1))
+    io.write_png(path, np.clip(np.concatenate(tiles, 0), 0, 1))
+
+
+# ------------------------------------------------------------------------- the loop
+
+
+def train(config: TrainConfig) -> dict[str, Any]:
+    """Run (or resume) a training run; return the last validation metrics and timings."""
+    torch.set_num_threads(config.threads)
+    rank, world = _dist_setup()
+    run = Path(config.out)
+    if rank == 0:
+        (run / "panels").mkdir(parents=True, exist_ok=True)
+    _barrier()
+    prior = load_prior(config.prior)
+    sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed)
+    weights = LossWeights(**config.weights)
+
+    torch.manual_seed(config.seed)
+    if config.stage == "inverse":
+        model: torch.nn.Module = InverseNet(config.width, config.depth)
+        teacher = None
+    else:
+        model = ShadowNet(config.width, config.depth)
+        teacher = load_inverse(config.inverse)
+        for p in teacher.parameters():
+            p.requires_grad_(False)
+    opt = torch.optim.Adam(model.parameters(), lr=config.lr)
+
+    start, seconds = 0, 0.0
+    side = ckpt.latest_checkpoint(run)
+    if side is not None:
+        meta = ckpt.load_checkpoint(side, model, opt)
+        if meta["config"] and TrainConfig(**{**meta["config"], "out": config.out}).identity() != config.identity():
+            raise ValueError(f"{str(run)!r} holds a run with another configuration; use another --out")
+        start, seconds = int(meta["step"]), float(meta.get("train_seconds", 0.0))
+    if start >= config.steps:
+        if rank == 0:
+            print(f"{run}: already at step {start} >= {config.steps}")
+        return {"step": start, "train_seconds": seconds}
+
+    net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
+    logs = _Logs(run, start, rank == 0)
+    if rank == 0 and start == 0:
+        io.write_json(run / "config.json", {**asdict(config), "world_size": world,
+                                            "parameters": count_parameters(model)})
+
+    from tqdm import tqdm
+
+    bar = tqdm(total=config.steps, initial=start, disable=not (config.progress and rank == 0), dynamic_ncols=True,
+               desc=f"train {config.stage}")
+    metrics: dict[str, float] = {}
+    model.train()
+    for step in range(start, config.steps):
+        t0 = time.perf_counter()
+        batch = sampler.batch(config.batch, step, rank)
+        if config.stage == "inverse":
+            loss, terms, _ = inverse_losses(net, batch, prior, weights)
+        else:
+            with torch.no_grad():
+                dec = decompose_and_solve(teacher, batch.image, batch.sky, prior)
+            pred = net(dec["normals"], dec["lighting"])
+            fg = dec["foreground"]
+            loss = ((pred - dec["shadow"]) ** 2 * fg).sum() / fg.sum().clamp_min(1.0)
+            terms = {"shadow_mse": float(loss.detach())}
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        gnorm = torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        opt.step()
+        seconds += time.perf_counter() - t0
+        done = step + 1
+        terms = _mean_terms({**terms, "total": float(loss.detach())}, world)
+        bar.update(1)
+        bar.set_postfix(loss=f"{terms['total']:.4g}")
+        if done % config.log_every == 0 or done == config.steps:
+            logs.write("train.csv", done, {**terms, "grad_norm": float(gnorm), "seconds": seconds})
+        if done % config.ckpt_every == 0 or done == config.steps:
+            if rank == 0:
+                ckpt.save_checkpoint(run, done, model, opt, {"config": asdict(config), "train_seconds": seconds,
+                                                             "world_size": world})
+            _barrier()
+        if done % config.val_every == 0 or done == config.steps:
+            if rank == 0:
+                metrics = validate(model if config.stage == "inverse" else teacher, prior, config,
+                                   shadow_net=model if config.stage == "shadow" else None,
+                                   panel=run / "panels" / f"step_{done:07d}.png")
+                logs.write("val.csv", done, metrics)
+                model.train()
+            _barrier()
+    bar.close()
+    logs.close()
+    sync = _rank_divergence(model, world)
+    if rank == 0:
+        io.write_json(run / "summary.json", {"step": config.steps, "train_seconds": seconds, "world_size": world,
+                                             "parameters": count_parameters(model), "val": metrics,
+                                             "rank_param_max_diff": sync})
+    return {"step": config.steps, "train_seconds": seconds, "val": metrics}
+
+
+def validate(inverse: torch.nn.Module, prior, config: TrainConfig, shadow_net: torch.nn.Module | None = None,
+             panel: Path | None = None) -> dict[str, float]:
+    """Metrics on held-out scenes (``val_data`` or the ``val`` split of ``data``) + a panel."""
+    inverse.eval()
+    if shadow_net is not None:
+        shadow_net.eval()
+    root = config.val_data or config.data
+
+    def decompose(image: torch.Tensor, sky: torch.Tensor) -> dict[str, torch.Tensor]:
+        return decompose_and_solve(inverse, image, sky, prior)
+
+    shadow_fn = (lambda out: shadow_net(out["normals"], out["lighting"])) if shadow_net is not None else None
+    metrics = evaluate(decompose, root, config.val_split, config.res, prior, config.val_images, shadow_fn)
+    if panel is not None:
+        from synth.dataset import SynthDataset
+
+        from .data import load_photo
+
+        ds = SynthDataset(root, split=config.val_split, mode="self_supervised")
+        picks = ds.items[:: max(1, len(ds.items) // 4)][:4]
+        photos = [load_photo(ds, it.scene, it.view, it.light, config.res) for it in picks]
+        image = torch.stack([p["image"] for p in photos])
+        with torch.no_grad():
+            out = decompose(image, torch.stack([p["sky"] for p in photos]))
+            if shadow_fn is not None:
+                out["shadow_net"] = shadow_fn(out)
+        write_panel(panel, image, out)
+    return metrics

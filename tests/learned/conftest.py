@@ -1,0 +1,31 @@
+"""A tiny rendered dataset (shared by the learned tests) and a tiny lighting prior."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+TINY = dict(scenes=3, views=2, lights=2, res=24, spp=4, gbuffer_spp=2, shadow_spp=2, env_resolution=16,
+            kinds=("sunsky", "overcast", "hdri"))
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset(tmp_path_factory) -> Path:
+    """3 scenes x 2 views x 2 lightings at 24 px (a few seconds with Mitsuba)."""
+    from synth import writer
+
+    root = tmp_path_factory.mktemp("learned_ds")
+    writer.write_dataset(root, writer.SynthConfig(**TINY), progress=False)
+    return root
+
+
+@pytest.fixture(scope="session")
+def tiny_prior(tmp_path_factory) -> Path:
+    """A prior fitted on a few outdoor lightings (seconds), saved as .npz."""
+    from learned.lighting import fit_outdoor_prior
+
+    path = tmp_path_factory.mktemp("prior") / "prior.npz"
+    fit_outdoor_prior(k=12, n_sky=24, n_hdri_per_map=4, seed=3, path=path)
+    return path
+

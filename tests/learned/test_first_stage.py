@@ -1,0 +1,236 @@
+"""Specification of the first stage: self-supervised training of the inverse network and ShadowNet.
+
+Runs on a tiny dataset rendered in a fixture (3 scenes x 2 views x 2 lightings, 24 px) with
+tiny networks; the whole file takes about a minute on 2 cores.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from learned import checkpoint as ckpt
+from learned.data import PairSampler
+from learned.networks import InverseNet, ShadowNet
+from learned.objectives import inverse_losses
+from learned.train import TrainConfig, train
+from physrelight.lighting_prior import LightingPrior
+from synth.dataset import GroundTruthAccessError
+
+TINY_NET = dict(width=4, depth=2, res=24)
+
+
+def config(data: Path, out: Path, prior: Path, **kw) -> TrainConfig:
+    base = dict(stage="inverse", data=str(data), out=str(out), prior=str(prior), train_split="all",
+                val_split="all", batch=2, steps=6, val_every=1000, val_images=4, ckpt_every=3, log_every=1,
+                threads=1, seed=5, progress=False, lr=3e-3, **TINY_NET)
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def rows(path: Path) -> list[dict[str, str]]:
+    with path.open() as f:
+        return list(csv.DictReader(f))
+
+
+def test_01_the_training_loader_refuses_ground_truth(tiny_dataset: Path) -> None:
+    sampler = PairSampler(tiny_dataset, split="all", res=24)
+    for key in ("albedo", "normal", "depth", "shadow", "sh", "lighting", "radiance", "photo_params"):
+        with pytest.raises(GroundTruthAccessError):
+            sampler.ds.load("scene_0000", 0, 0, keys=(key,))
+    batch = sampler.batch(2, step=0)
+    assert batch.image.shape == (4, 3, 24, 24) and batch.depth.shape == (4, 1, 24, 24)
+    assert set(vars(batch)) == {"image", "depth", "sky", "K", "world_to_camera", "keys"}
+
+
+def test_02_batches_are_a_function_of_seed_step_and_rank(tiny_dataset: Path) -> None:
+    a = PairSampler(tiny_dataset, split="all", res=24, seed=1)
+    b = PairSampler(tiny_dataset, split="all", res=24, seed=1, cache=False)
+    assert a.pair_keys(3, 7, 0) == b.pair_keys(3, 7, 0)
+    assert torch.equal(a.batch(3, 7).image, b.batch(3, 7).image)
+    assert a.pair_keys(3, 7, 0) != a.pair_keys(3, 7, 1) or a.pair_keys(3, 8, 0) != a.pair_keys(3, 7, 0)
+    for (sa, va, la), (sb, vb, lb) in a.pair_keys(20, 3):
+        assert sa == sb and (va, la) != (vb, lb)  # two different photos of one scene
+
+
+def test_03_networks_output_valid_layers_in_any_mode_and_batch() -> None:
+    torch.manual_seed(0)
+    net = InverseNet(width=4, depth=2)
+    x = torch.rand(3, 3, 21, 26)
+    with torch.no_grad():
+        out = net(x)
+    assert out["albedo"].shape == (3, 3, 21, 26) and out["shadow"].shape == (3, 1, 21, 26)
+    assert float(out["albedo"].min()) >= 0 and float(out["albedo"].max()) <= 1
+    assert torch.allclose(out["normals"].norm(dim=1), torch.ones(3, 21, 26), atol=1e-5)
+    assert float(out["normals"][:, 2].min()) > 0  # facing the camera
+    # GroupNorm, no batch statistics: the same image gives the same output alone, in a batch, train or eval.
+    alone = net.eval()(x[1:2])["albedo"]
+    assert torch.allclose(net.train()(x)["albedo"][1:2], alone, atol=1e-5)
+    sn = ShadowNet(width=4, depth=2)
+    light = torch.randn(3, 9, 3)
+    with torch.no_grad():
+        s = sn(out["normals"], light)
+    assert s.shape == (3, 1, 21, 26) and float(s.min()) >= 0 and float(s.max()) <= 1
+    assert torch.allclose(sn.eval()(out["normals"][:1].detach(), light[:1] * 7.0), s[:1], atol=1e-5)  # scale-free
+    with pytest.raises(ValueError, match=r"\(B, 3, H, W\)"):
+        net(torch.rand(3, 21, 26))
+
+
+def test_04_gradients_flow_through_the_lighting_solve_into_the_network(tiny_dataset: Path, tiny_prior: Path) -> None:
+    torch.manual_seed(0)
+    net = InverseNet(width=4, depth=2)
+    batch = PairSampler(tiny_dataset, split="all", res=24).batch(2, 0)
+    prior = LightingPrior.load(tiny_prior)
+    captured = {}
+
+    def hook(grad: torch.Tensor) -> None:
+        captured["lighting"] = grad
+
+    from learned import objectives
+
+    original = objectives.solve_projected
+
+    def spy(*args, **kw):
+        solved, projected = original(*args, **kw)
+        assert solved.requires_grad and projected.requires_grad
+        projected.register_hook(hook)
+        return solved, projected
+
+    objectives.solve_projected = spy
+    try:
+        total, terms, out = inverse_losses(net, batch, prior)
+    finally:
+        objectives.solve_projected = original
+    total.backward()
+    assert captured["lighting"].abs().sum() > 0  # the loss depends on the solved lighting...
+    # ...and the solve's gradient reaches the albedo head: d(lighting)/d(albedo) != 0.
+    image = batch.image
+    albedo = net(image)["albedo"].detach().requires_grad_(True)
+    normals = net(image)["normals"].detach()
+    solved = objectives.solve_projected(image, albedo, normals, torch.ones_like(image[:, :1]),
+                                        (~batch.sky).float(), prior)[1]
+    solved.sum().backward()
+    assert albedo.grad is not None and float(albedo.grad.abs().sum()) > 0
+    assert all(p.grad is not None for p in net.parameters())
+    assert set(terms) == {"appearance", "albedo", "normal", "cross", "prior", "shadow"}
+
+
+def test_05_a_tiny_self_supervised_run_lowers_the_loss(tiny_dataset: Path, tiny_prior: Path, tmp_path: Path) -> None:
+    cfg = config(tiny_dataset, tmp_path / "run", tiny_prior, steps=40, ckpt_every=40, val_every=40, log_every=1,
+                 batch=2)
+    result = train(cfg)
+    log = rows(tmp_path / "run" / "train.csv")
+    total = np.array([float(r["total"]) for r in log])
+    assert len(total) == 40 and np.all(np.isfinite(total))
+    assert total[-10:].mean() < 0.7 * total[:10].mean()
+    for key in ("albedo_si_mse", "normal_mae_deg", "shadow_ap", "lighting_rel_err", "baseline_albedo_si_mse"):
+        assert np.isfinite(result["val"][key]), key
+    assert (tmp_path / "run" / "panels" / "step_0000040.png").is_file()
+    assert list((tmp_path / "run" / "tb").iterdir())  # TensorBoard events
+    assert (tmp_path / "run" / "checkpoints" / "step_0000040.safetensors").is_file()
+
+
+def test_06_resume_after_a_kill_gives_identical_state_and_losses(tiny_dataset: Path, tiny_prior: Path,
+                                                                  tmp_path: Path) -> None:
+    straight = config(tiny_dataset, tmp_path / "straight", tiny_prior, steps=6, ckpt_every=3)
+    train(straight)
+    killed = config(tiny_dataset, tmp_path / "killed", tiny_prior, steps=6, ckpt_every=3)
+    train(config(tiny_dataset, tmp_path / "killed", tiny_prior, steps=4, ckpt_every=3))  # dies after step 4...
+    (tmp_path / "killed" / "checkpoints" / "step_0000004.safetensors").unlink()
+    (tmp_path / "killed" / "checkpoints" / "step_0000004.json").unlink()  # ...before its step-4 checkpoint
+    torch.manual_seed(1234)  # a different global RNG state must not matter
+    train(killed)
+    a = ckpt.load_checkpoint(tmp_path / "straight" / "checkpoints" / "step_0000006.json")
+    b = ckpt.load_checkpoint(tmp_path / "killed" / "checkpoints" / "step_0000006.json")
+    assert a["step"] == b["step"] == 6
+    from safetensors.torch import load_file
+
+    ta = load_file(str(tmp_path / "straight" / "checkpoints" / "step_0000006.safetensors"))
+    tb = load_file(str(tmp_path / "killed" / "checkpoints" / "step_0000006.safetensors"))
+    assert ta.keys() == tb.keys() and any(k.startswith("optim.") for k in ta)
+    for k in ta:
+        assert torch.equal(ta[k], tb[k]), k  # model, Adam moments, RNG: bit-identical
+    la, lb = rows(tmp_path / "straight" / "train.csv"), rows(tmp_path / "killed" / "train.csv")
+    assert [r["step"] for r in lb] == [str(i) for i in range(1, 7)]  # rows after the checkpoint replaced
+    assert [r["total"] for r in la] == [r["total"] for r in lb]  # the same numbers after the resume
+
+
+def test_07_ddp_with_two_gloo_processes_trains_and_agrees(tiny_dataset: Path, tiny_prior: Path, tmp_path: Path) -> None:
+    torchrun = Path(sys.executable).with_name("torchrun")
+    physrelight = Path(sys.executable).with_name("physrelight")
+    out = tmp_path / "ddp"
+    cmd = [str(torchrun), "--standalone", "--nproc_per_node", "2", str(physrelight), "train", "inverse",
+           "--data", str(tiny_dataset), "--out", str(out), "--prior", str(tiny_prior), "--train-split", "all",
+           "--val-split", "all", "--width", "4", "--depth", "2", "--res", "24", "--batch", "1", "--steps", "3",
+           "--ckpt-every", "3", "--val-every", "3", "--val-images", "2", "--threads", "1", "--log-every", "1", "--quiet"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=240, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    meta = ckpt.load_checkpoint(out / "checkpoints" / "step_0000003.json", restore_rng=False)
+    assert meta["world_size"] == 2
+    assert len(rows(out / "train.csv")) == 3
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["world_size"] == 2 and summary["rank_param_max_diff"] < 1e-6  # DDP kept the ranks in sync
+
+
+def test_08_exported_weights_load_offline_and_relight(tiny_dataset: Path, tiny_prior: Path, tmp_path: Path) -> None:
+    from learned import Relighter
+
+    inv = config(tiny_dataset, tmp_path / "inv", tiny_prior, steps=2, ckpt_every=2, val_every=2)
+    train(inv)
+    train(config(tiny_dataset, tmp_path / "sh", tiny_prior, stage="shadow", inverse=str(tmp_path / "inv"),
+                 steps=2, ckpt_every=2, val_every=2))
+    dest = tmp_path / "weights"
+    ckpt.export_weights(ckpt.latest_checkpoint(tmp_path / "inv"), dest / "inverse.safetensors", "inverse")
+    ckpt.export_weights(ckpt.latest_checkpoint(tmp_path / "sh"), dest / "shadow.safetensors", "shadow")
+    shutil.copy(tiny_prior, dest / "lighting_prior.npz")
+    r = Relighter.load(dest)
+    photo = (np.random.default_rng(0).uniform(0, 1, (24, 32, 3))).astype(np.float32)
+    out = r.decompose(photo)
+    assert out["albedo"].shape == (24, 32, 3) and out["normals"].shape == (24, 32, 3)
+    assert out["shadow"].shape == (24, 32, 1) and out["lighting"].shape == (9, 3)
+    # Round trip: the same weights, re-saved and re-loaded, give the same decomposition.
+    again = Relighter.load(dest).decompose(photo)
+    np.testing.assert_array_equal(out["albedo"], again["albedo"])
+    target = np.zeros((9, 3))
+    target[0] = 1.0
+    relit = r.relight(photo, target)
+    assert relit.shape == (24, 32, 3) and 0 <= relit.min() and relit.max() <= 1
+    env = np.ones((8, 16, 3), np.float32)
+    relit_t = r.relight(torch.from_numpy(photo).permute(2, 0, 1), env, world_to_camera=np.eye(4))
+    assert relit_t.shape == (3, 24, 32)
+    sun = r.target_lighting(np.array([0.0, 2.0, 0.0]))  # sun overhead, level camera
+    from physrelight import sh
+
+    e_up = sh.irradiance(sun.numpy(), np.array([[0.0, 1.0, 0.0]]))[0]
+    # the order-2 sun at its own direction (1/4 + 1/2 + 5/16 = 1.0625, the clamped cosine's
+    # truncation) + the fill sky (0.3)
+    np.testing.assert_allclose(e_up, 1.0625 + 0.3, rtol=1e-6)
+    with pytest.raises(ValueError, match="target"):
+        r.relight(photo, np.zeros((4, 3)))
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        r.decompose(photo * 3)
+    with pytest.raises(ValueError, match="rotation"):
+        r.relight(photo, target, world_to_camera=np.diag([1.0, 1.0, -1.0]))
+
+
+def test_09_the_shipped_weights_load_without_arguments() -> None:
+    from learned import Relighter
+    from learned.lighting import WEIGHTS_DIR
+
+    if not (WEIGHTS_DIR / "inverse.safetensors").is_file():
+        pytest.fail("no shipped weights in learned/weights (see docs/learned.md to train them)")
+    r = Relighter.load()
+    total = sum(p.stat().st_size for p in WEIGHTS_DIR.iterdir())
+    assert total < 8e6  # a few MB
+    out = r.decompose(np.full((32, 32, 3), 128, np.uint8))
+    assert np.isfinite(out["lighting"]).all()
