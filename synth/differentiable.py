@@ -34,6 +34,8 @@ discontinuous function of albedo.
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -158,3 +160,67 @@ class DifferentiableRenderer:
         p.update()
         # Mitsuba insists on independent primal and adjoint random numbers (unbiased gradients).
         return mi.render(self.scene, p, spp=spp, seed=seed, seed_grad=seed + GRADIENT_SEED_OFFSET)
+
+
+@dataclass(frozen=True)
+class GradientCheck:
+    """AD vs central finite difference of ``sum(W * image)`` along one direction of an input.
+
+    Attributes:
+        name: the input.
+        ad: mean directional derivative from the adjoint pass over the seeds.
+        fd: mean central finite difference (fixed primal seed per pair) over the seeds.
+        standard_error: combined standard error of ``ad - fd``.
+        seeds: number of seeds of each estimate.
+    """
+
+    name: str
+    ad: float
+    fd: float
+    standard_error: float
+    seeds: int
+
+    @property
+    def z(self) -> float:
+        """``(ad - fd) / standard_error``: Student-t with about ``2 (seeds - 1)`` dof under agreement."""
+        return (self.ad - self.fd) / max(self.standard_error, 1e-30)
+
+    @property
+    def relative_error(self) -> float:
+        return abs(self.ad - self.fd) / max(abs(self.fd), 1e-30)
+
+
+def gradient_check(renderer: DifferentiableRenderer, name: str, step: float, seeds: int = 6, seed: int = 0) -> GradientCheck:
+    """Compare the adjoint gradient with a central finite difference along a random direction.
+
+    Both are unbiased estimates of the derivative of the expected ``sum(W * image)`` (``W``
+    fixed random weights): the finite difference because, for fixed random numbers, the
+    estimate is a polynomial of degree <= ``max_depth - 1`` in the albedo and linear in the
+    emitted radiance, so central differences are exact up to float round-off. Their
+    difference is judged against its standard error over ``seeds`` independent seeds.
+
+    Args:
+        renderer: the scene.
+        name: an input of :meth:`DifferentiableRenderer.render`.
+        step: finite-difference step along the unit direction (in the input's units).
+        seeds: independent seeds per estimate (>= 2).
+        seed: seeds the direction and the weights.
+    """
+    if seeds < 2:
+        raise ValueError(f"seeds must be >= 2 to estimate a standard error, got {seeds}")
+    g = torch.Generator().manual_seed(seed)
+    x0 = renderer.parameters()[name]
+    v = torch.randn(x0.shape, generator=g)
+    v = v / v.norm()
+    w = torch.rand(renderer.height, renderer.width, 3, generator=g)
+    ad, fd = [], []
+    for s in range(seeds):
+        x = x0.clone().requires_grad_(True)
+        (renderer.render({name: x}, seed=100 + s) * w).sum().backward()
+        ad.append(float((x.grad * v).sum()))
+        with torch.no_grad():
+            hi = (renderer.render({name: x0 + step * v}, seed=200 + s) * w).sum()
+            lo = (renderer.render({name: x0 - step * v}, seed=200 + s) * w).sum()
+        fd.append(float(hi - lo) / (2 * step))
+    se = math.sqrt(np.var(ad, ddof=1) / seeds + np.var(fd, ddof=1) / seeds)
+    return GradientCheck(name=name, ad=float(np.mean(ad)), fd=float(np.mean(fd)), standard_error=se, seeds=seeds)
