@@ -10,78 +10,10 @@ import math
 import numpy as np
 import pytest
 import torch
-import trimesh
 
 from physrelight import camera as pcam
 from synth import cameras, lighting, render
-from synth.scene import Material, Part, SceneSpec
-
-
-def flat_mesh(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray) -> trimesh.Trimesh:
-    m = trimesh.Trimesh(vertices=vertices, faces=faces, vertex_normals=normals, process=False)
-    m.visual = trimesh.visual.TextureVisuals(uv=np.zeros((len(vertices), 2)))
-    return m
-
-
-def box_mesh(lo, hi) -> trimesh.Trimesh:
-    """Axis-aligned box with flat faces (4 vertices per face, outward normals)."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    verts, faces, normals = [], [], []
-    for axis in range(3):
-        for side, sign in ((lo, -1.0), (hi, 1.0)):
-            u, v = [a for a in range(3) if a != axis]
-            quad = []
-            for a, b in ((0, 0), (1, 0), (1, 1), (0, 1)):
-                p = np.empty(3)
-                p[axis] = side[axis]
-                p[u] = (lo, hi)[a][u]
-                p[v] = (lo, hi)[b][v]
-                quad.append(p)
-            n = np.zeros(3)
-            n[axis] = sign
-            base = len(verts)
-            verts += quad
-            normals += [n] * 4
-            tri = [[0, 1, 2], [0, 2, 3]]
-            # Counter-clockwise seen from outside.
-            if np.dot(np.cross(quad[1] - quad[0], quad[2] - quad[0]), n) < 0:
-                tri = [[0, 2, 1], [0, 3, 2]]
-            faces += [[base + i for i in t] for t in tri]
-    return flat_mesh(np.array(verts), np.array(faces), np.array(normals))
-
-
-def ground_mesh(size: float = 200.0) -> trimesh.Trimesh:
-    s = size / 2
-    v = np.array([[-s, 0, -s], [s, 0, -s], [s, 0, s], [-s, 0, s]], float)
-    return flat_mesh(v, np.array([[0, 2, 1], [0, 3, 2]]), np.tile([0.0, 1.0, 0.0], (4, 1)))
-
-
-def const_material(rgb, name: str) -> Material:
-    return Material(kind="diffuse", texture=np.full((4, 4, 3), rgb, dtype=np.float32), name=name)
-
-
-def sphere_spec(radius: float = 1.0, with_ground: bool = False) -> SceneSpec:
-    sph = trimesh.creation.icosphere(subdivisions=5, radius=radius)
-    sph.apply_translation([0, radius + 0.5, 0])
-    mesh = flat_mesh(np.asarray(sph.vertices), np.asarray(sph.faces),
-                     (np.asarray(sph.vertices) - [0, radius + 0.5, 0]) / radius)
-    parts = [Part("sphere", mesh, const_material([0.6, 0.45, 0.3], "sphere"), role="landmark")]
-    if with_ground:
-        parts.append(Part("ground", ground_mesh(), const_material([0.3, 0.3, 0.3], "ground"), role="ground"))
-    return SceneSpec(seed=0, landmark_type="statue", parts=parts,
-                     landmark_bounds=np.array([[-radius, 0.5, -radius], [radius, 2 * radius + 0.5, radius]]),
-                     ground_size=200.0)
-
-
-def box_spec() -> SceneSpec:
-    parts = [Part("box", box_mesh([-0.5, 0.0, -0.5], [0.5, 2.0, 0.5]), const_material([0.7, 0.2, 0.2], "box")),
-             Part("ground", ground_mesh(), const_material([0.5, 0.5, 0.5], "ground"), role="ground")]
-    return SceneSpec(seed=0, landmark_type="tower", parts=parts,
-                     landmark_bounds=np.array([[-0.5, 0.0, -0.5], [0.5, 2.0, 0.5]]), ground_size=200.0)
-
-
-def view(eye, target, size: int = 32, fov: float = 50.0) -> pcam.Camera:
-    return pcam.Camera.look_at(np.asarray(eye, float), np.asarray(target, float), fov, size, size)
+from validation.scenes import box_spec, sphere_spec, view
 
 
 @pytest.fixture(scope="module")
