@@ -19,15 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 
-
-def _pos(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
-    return v
+from physrelight.cli import positive_int
 
 
 def _config(args: argparse.Namespace, stage: str):
@@ -110,18 +102,18 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--val-data", default=None, help="dataset for validation (default: --data)")
     p.add_argument("--val-split", default="val", help="split validated on (default: val)")
     p.add_argument("--train-split", default="train", help="split trained on (default: train)")
-    p.add_argument("--width", type=_pos, default=16, help="UNet width (default: 16)")
-    p.add_argument("--depth", type=_pos, default=3, help="UNet levels (default: 3)")
-    p.add_argument("--res", type=_pos, default=64, help="training resolution (default: 64)")
-    p.add_argument("--batch", type=_pos, default=4, help="photo pairs per step and process (default: 4)")
-    p.add_argument("--steps", type=_pos, default=2000)
+    p.add_argument("--width", type=positive_int, default=16, help="UNet width (default: 16)")
+    p.add_argument("--depth", type=positive_int, default=3, help="UNet levels (default: 3)")
+    p.add_argument("--res", type=positive_int, default=64, help="training resolution (default: 64)")
+    p.add_argument("--batch", type=positive_int, default=4, help="photo pairs per step and process (default: 4)")
+    p.add_argument("--steps", type=positive_int, default=2000)
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--val-every", type=_pos, default=250)
-    p.add_argument("--val-images", type=_pos, default=96, help="held-out photos per validation")
-    p.add_argument("--ckpt-every", type=_pos, default=250)
-    p.add_argument("--log-every", type=_pos, default=10)
-    p.add_argument("--threads", type=_pos, default=2, help="torch CPU threads per process (default: 2)")
+    p.add_argument("--val-every", type=positive_int, default=250)
+    p.add_argument("--val-images", type=positive_int, default=96, help="held-out photos per validation")
+    p.add_argument("--ckpt-every", type=positive_int, default=250)
+    p.add_argument("--log-every", type=positive_int, default=10)
+    p.add_argument("--threads", type=positive_int, default=2, help="torch CPU threads per process (default: 2)")
     p.add_argument("--prior", default=None, help="lighting prior .npz (default: the shipped one)")
     p.add_argument("--loss-weight", action="append", metavar="NAME=VALUE",
                    help="override a loss weight (appearance, albedo, normal, cross, prior, shadow)")
@@ -147,8 +139,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ev.add_argument("--data", required=True, help="synth dataset folder with ground truth")
     ev.add_argument("--split", default="all", help="split to evaluate (default: all)")
     ev.add_argument("--weights", default=None, help="weights folder (default: the shipped ones)")
-    ev.add_argument("--max-images", type=_pos, default=None)
-    ev.add_argument("--threads", type=_pos, default=2)
+    ev.add_argument("--max-images", type=positive_int, default=None)
+    ev.add_argument("--threads", type=positive_int, default=2)
     ev.add_argument("--json", default=None, help="also write the metrics here")
     ev.set_defaults(handler=_evaluate)
 

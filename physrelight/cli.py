@@ -28,11 +28,12 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", default="out/demo", help="output folder (default: out/demo)")
     p.add_argument("--source", default="city", help="shipped HDRI lighting the photo (default: city)")
     p.add_argument("--targets", nargs="+", default=["forest", "courtyard"], help="shipped HDRIs to relight to")
-    p.add_argument("--size", type=_positive_int, default=80, help="sphere image size in pixels (default: 80)")
+    p.add_argument("--size", type=positive_int, default=80, help="sphere image size in pixels (default: 80)")
     p.set_defaults(handler=_demo)
 
 
-def _positive_int(text: str) -> int:
+def positive_int(text: str) -> int:
+    """argparse type: a positive integer, with a one-line error otherwise (shared by subcommands)."""
     try:
         v = int(text)
     except ValueError:
@@ -63,20 +64,20 @@ def _add_synth(sub: argparse._SubParsersAction) -> None:
                                    "tourist-like views, with ground truth (see synth/writer.py for the layout). "
                                    "Resumable: re-run the same command to finish an interrupted dataset.")
     p.add_argument("output", help="dataset folder")
-    p.add_argument("--scenes", type=_positive_int, default=4)
-    p.add_argument("--views", type=_positive_int, default=4)
-    p.add_argument("--lights", type=_positive_int, default=3)
-    p.add_argument("--res", type=_positive_int, default=128, help="image size in pixels (square)")
-    p.add_argument("--spp", type=_positive_int, default=64, help="path-tracing samples per pixel")
+    p.add_argument("--scenes", type=positive_int, default=4)
+    p.add_argument("--views", type=positive_int, default=4)
+    p.add_argument("--lights", type=positive_int, default=3)
+    p.add_argument("--res", type=positive_int, default=128, help="image size in pixels (square)")
+    p.add_argument("--spp", type=positive_int, default=64, help="path-tracing samples per pixel")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--shard", default="0/1", help="render scenes i, i+n, ... of the dataset (i/n)")
     p.add_argument("--hdri-dir", default=None, help="folder of .exr maps for the hdri lighting kind "
                                                     "(default: the maps shipped in the package)")
-    p.add_argument("--max-depth", type=_positive_int, default=8, help="path length (bounces + 1)")
-    p.add_argument("--gbuffer-spp", type=_positive_int, default=16)
-    p.add_argument("--shadow-spp", type=_positive_int, default=32,
+    p.add_argument("--max-depth", type=positive_int, default=8, help="path length (bounces + 1)")
+    p.add_argument("--gbuffer-spp", type=positive_int, default=16)
+    p.add_argument("--shadow-spp", type=positive_int, default=32,
                    help="shadow samples per pixel (x4 for lightings without a sun)")
-    p.add_argument("--env-res", type=_positive_int, default=128, help="sky map height for sun/sky lightings")
+    p.add_argument("--env-res", type=positive_int, default=128, help="sky map height for sun/sky lightings")
     p.add_argument("--kinds", nargs="+", default=["sunsky", "evening", "overcast", "hdri"],
                    help="lighting kinds to draw from")
     p.add_argument("--glossy-fraction", type=float, default=0.0, help="share of non-Lambertian materials")
