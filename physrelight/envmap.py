@@ -295,10 +295,9 @@ def downsample(env: Array, height: int) -> Array:
     m = 2 * int(math.ceil((h - 1) / (height - 1)))
     hs, ws = (height - 1) * m + 1, 2 * height * m
     theta = np.linspace(0.0, np.pi, hs)
-    phi = 2 * np.pi * (np.arange(ws) + 0.5) / ws
-    st = np.sin(theta)[:, None]
-    dirs = np.stack(np.broadcast_arrays(st * np.sin(phi), np.cos(theta)[:, None], -st * np.cos(phi)), axis=-1)
-    fine = to_tensor(sample(e.to(torch.float64), torch.from_numpy(dirs)), "fine")[0]  # (hs, ws, 3)
+    # The sample grid has the lat-long layout (align-corners rows, texel-centred columns), not 2:1;
+    # built uncached: it is large and used once per downsampling.
+    fine = to_tensor(sample(e.to(torch.float64), torch.tensor(_directions.__wrapped__(hs, ws))), "fine")[0]
     # Quadrature weight sin(theta) of each sample row; at the poles the first sample
     # row away from the pole carries the cap (sin(0) = 0 would drop it).
     w_theta = torch.from_numpy(np.maximum(np.sin(theta), np.sin(np.pi / (hs - 1)) / 4))

@@ -31,10 +31,7 @@ def _lighting(c: torch.Tensor, batch: int, name: str = "lighting") -> tuple[torc
         c = c.unsqueeze(0).expand(batch, -1, -1)
     if c.ndim != 3 or c.shape[-1] != 3 or c.shape[0] != batch:
         raise ValueError(f"{name} must have shape (K, 3) or (B={batch}, K, 3), got {tuple(c.shape)}")
-    try:
-        order = sh.order_of(c.shape[1])
-    except ValueError:
-        raise ValueError(f"{name} must have K = (order+1)^2 coefficients (9 for order 2), got {c.shape[1]}") from None
+    order = sh._coeff_order(c, name)
     check_finite(c, name)
     return c, order
 

@@ -25,20 +25,14 @@ from synth.backend import load_mitsuba
 
 def bare_render_seconds(config: writer.SynthConfig, index: int) -> float:
     """Seconds of ``mi.render`` alone for every view x lighting of scene ``index``."""
-    from synth import cameras, lighting, render, scene
+    from synth import render
 
     mi = load_mitsuba()
-    seed = writer._seed(config.seed, index)
-    spec = scene.generate_scene(seed % (2**31), trees=config.trees)
-    views = cameras.sample_views(spec, config.views, seed=writer._seed(seed, 1) % (2**31), width=config.res,
-                                 height=config.res)
-    kind_rng = np.random.default_rng(writer._seed(seed, 2))
+    _, spec, views, lights = writer.scene_inputs(config, index)
     total = 0.0
-    for li in range(config.lights):
-        light = lighting.sample_lighting(str(kind_rng.choice(config.kinds)), writer._seed(seed, 3, li),
-                                         config.hdri_dir, resolution=config.env_resolution)
+    for light in lights:
         mscene = render.build_scene(spec, views, light, config.spp, config.max_depth)
-        for vi in range(config.views):
+        for vi in range(len(views)):
             t = time.perf_counter()
             np.array(mi.render(mscene, sensor=vi, spp=config.spp, seed=vi))
             total += time.perf_counter() - t

@@ -1352,6 +1352,21 @@ def _footprint_radius(g: _Geom) -> float:
     return float(np.max(np.linalg.norm(g.v[:, [0, 2]], axis=1)))
 
 
+def _free_spot(r: Rng, center: np.ndarray, yaw: float, half_angle: float, base: float, extra: tuple[float, float],
+               radius: float, margin: float, occupied: list[tuple[float, float, float, float]]
+               ) -> tuple[float, float] | None:
+    """A ground point ``(x, z)`` around ``center``: direction ``yaw +- half_angle``, distance
+    ``base + uniform(*extra)``, farther than ``radius + r_i + margin`` from every occupied
+    circle ``(x_i, z_i, r_i, top)``; None after 20 tries."""
+    for _ in range(20):
+        a = yaw + r.uniform(-half_angle, half_angle)
+        d = base + r.uniform(*extra)
+        x, z = center[0] + d * math.sin(a), center[2] + d * math.cos(a)
+        if all(math.hypot(x - ox, z - oz) > radius + orad + margin for ox, oz, orad, _ in occupied):
+            return x, z
+    return None
+
+
 def generate_scene(
     seed: int,
     glossy_fraction: float = 0.0,
@@ -1413,14 +1428,10 @@ def generate_scene(
     for _ in range(int(geo.integers(0, 4))):
         pb = _Builder(palette, f"prop{n_props}")
         rad, top = _build_prop(geo, pb)
-        for _ in range(20):
-            a = front_yaw + geo.uniform(-1.6, 1.6)
-            d = r_fp + rad + geo.uniform(2.0, 10.0)
-            x, z = center[0] + d * math.sin(a), center[2] + d * math.cos(a)
-            if all(math.hypot(x - ox, z - oz) > rad + orad + 1.0 for ox, oz, orad, _ in occupied):
-                break
-        else:
+        spot = _free_spot(geo, center, front_yaw, 1.6, r_fp + rad, (2.0, 10.0), rad, 1.0, occupied)
+        if spot is None:
             continue
+        x, z = spot
         yaw = float(geo.uniform(-np.pi, np.pi))
         occupied.append((x, z, rad, top))
         n_props += 1
@@ -1432,14 +1443,10 @@ def generate_scene(
         trunks, crowns = [], []
         for _ in range(int(veg.integers(0, 10))):
             tg, cg, cr, h = _tree(veg)
-            for _ in range(20):
-                a = veg.uniform(-np.pi, np.pi)
-                d = r_fp + cr + veg.uniform(3.0, 35.0)
-                x, z = center[0] + d * math.sin(a), center[2] + d * math.cos(a)
-                if all(math.hypot(x - ox, z - oz) > cr + orad + 0.5 for ox, oz, orad, _ in occupied):
-                    break
-            else:
+            spot = _free_spot(veg, center, 0.0, np.pi, r_fp + cr, (3.0, 35.0), cr, 0.5, occupied)
+            if spot is None:
                 continue
+            x, z = spot
             occupied.append((x, z, cr, h))
             trunks += [_xf(g, None, (x, 0.0, z)) for g in tg]
             crowns += [_xf(g, None, (x, 0.0, z)) for g in cg]

@@ -33,7 +33,7 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -155,9 +155,23 @@ def write_dataset(out: str | Path, config: SynthConfig, shard: tuple[int, int] =
             "seconds": time.perf_counter() - t0}
 
 
+def scene_inputs(config: SynthConfig, index: int) -> tuple[int, Any, list[Any], list[Any]]:
+    """What scene ``index`` is rendered from: ``(seed, SceneSpec, cameras, lightings)``, all seeded."""
+    from . import cameras, lighting, scene
+
+    seed = _seed(config.seed, index)
+    spec = scene.generate_scene(seed % (2**31), glossy_fraction=config.glossy_fraction, trees=config.trees)
+    views = cameras.sample_views(spec, config.views, seed=_seed(seed, 1) % (2**31), width=config.res,
+                                 height=config.res)
+    kind_rng = np.random.default_rng(_seed(seed, 2))
+    lights = [lighting.sample_lighting(str(kind_rng.choice(config.kinds)), _seed(seed, 3, l), config.hdri_dir,
+                                       resolution=config.env_resolution) for l in range(config.lights)]
+    return seed, spec, views, lights
+
+
 def write_scene(root: Path, index: int, config: SynthConfig, on_unit=lambda: None) -> Path:
     """Render scene ``index`` into ``root/scene_XXXX`` atomically; return its folder."""
-    from . import cameras, lighting, mvs, photo, render, scene
+    from . import mvs, photo, render
 
     final = root / scene_name(index)
     partial = root / f".{scene_name(index)}.partial"
@@ -165,15 +179,8 @@ def write_scene(root: Path, index: int, config: SynthConfig, on_unit=lambda: Non
         shutil.rmtree(partial)  # left by a killed run: start the scene again
     partial.mkdir(parents=True)
     timer = render.Timer()
-    seed = _seed(config.seed, index)
-
     t = time.perf_counter()
-    spec = scene.generate_scene(seed % (2**31), glossy_fraction=config.glossy_fraction, trees=config.trees)
-    views = cameras.sample_views(spec, config.views, seed=_seed(seed, 1) % (2**31), width=config.res,
-                                 height=config.res)
-    kind_rng = np.random.default_rng(_seed(seed, 2))
-    lights = [lighting.sample_lighting(str(kind_rng.choice(config.kinds)), _seed(seed, 3, l), config.hdri_dir,
-                                       resolution=config.env_resolution) for l in range(config.lights)]
+    seed, spec, views, lights = scene_inputs(config, index)
     timer.add("setup", t)
     w2c = [np.asarray(v.world_to_camera, dtype=np.float64) for v in views]
 
