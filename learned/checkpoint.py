@@ -1,7 +1,8 @@
 """Checkpoints in ``safetensors`` (no pickle) with a JSON sidecar.
 
 ``RUN/checkpoints/step_XXXXXXX.safetensors`` holds the model (``model.*``), the Adam
-state (``optim.<param index>.<exp_avg|exp_avg_sq|step>``) and the torch RNG state
+state (``optim.<param index>.<exp_avg|exp_avg_sq|step>``; with several optimizers, as for a
+GAN's generator and discriminator, ``optim.<name>.<param index>.<...>``) and the torch RNG state
 (``rng.torch``); ``step_XXXXXXX.json`` holds the step, the configuration, the optimizer's
 param groups and anything else JSON-able. The sidecar is written last and its presence
 marks a checkpoint complete, so a run killed while saving resumes from the previous one.
@@ -39,19 +40,38 @@ def _atomic_write_json(data: Any, path: Path) -> None:
     os.replace(tmp, path)
 
 
-def save_checkpoint(run: str | Path, step: int, model: torch.nn.Module, optimizer: torch.optim.Optimizer,
+Optimizers = torch.optim.Optimizer | dict[str, torch.optim.Optimizer]
+
+
+def _named(optimizer: Optimizers) -> dict[str, torch.optim.Optimizer]:
+    """One optimizer keeps the historical unprefixed layout (name ""); a dict is stored by name."""
+    if isinstance(optimizer, torch.optim.Optimizer):
+        return {"": optimizer}
+    if not optimizer or any(not k or "." in k for k in optimizer):
+        raise ValueError(f"optimizer names must be non-empty and free of dots, got {sorted(optimizer)}")
+    return dict(optimizer)
+
+
+def save_checkpoint(run: str | Path, step: int, model: torch.nn.Module, optimizer: Optimizers,
                     extra: dict[str, Any]) -> Path:
-    """Write the checkpoint of ``step`` (optimizer steps done) into ``run/checkpoints``; return the sidecar path."""
+    """Write the checkpoint of ``step`` (optimizer steps done) into ``run/checkpoints``; return the sidecar path.
+
+    ``optimizer`` is one optimizer or a dict ``{name: optimizer}`` (e.g. ``{"g": ..., "d": ...}``).
+    """
     d = Path(run) / "checkpoints"
     d.mkdir(parents=True, exist_ok=True)
     tensors = {f"model.{k}": v for k, v in model.state_dict().items()}
-    opt = optimizer.state_dict()
-    for pid, state in opt["state"].items():
-        for key, value in state.items():
-            tensors[f"optim.{pid}.{key}"] = value if isinstance(value, torch.Tensor) else torch.tensor(value)
+    groups: dict[str, Any] = {}
+    for name, o in _named(optimizer).items():
+        opt = o.state_dict()
+        prefix = f"optim.{name}." if name else "optim."
+        for pid, state in opt["state"].items():
+            for key, value in state.items():
+                tensors[f"{prefix}{pid}.{key}"] = value if isinstance(value, torch.Tensor) else torch.tensor(value)
+        groups[name] = opt["param_groups"]
     tensors["rng.torch"] = torch.get_rng_state()
     _atomic_save_tensors(tensors, d / f"step_{step:07d}.safetensors")
-    sidecar = {"step": step, "param_groups": opt["param_groups"], **extra}
+    sidecar = {"step": step, "param_groups": groups[""] if "" in groups else groups, **extra}
     path = d / f"step_{step:07d}.json"
     _atomic_write_json(sidecar, path)
     return path
@@ -67,8 +87,9 @@ def latest_checkpoint(run: str | Path) -> Path | None:
 
 
 def load_checkpoint(sidecar: str | Path, model: torch.nn.Module | None = None,
-                    optimizer: torch.optim.Optimizer | None = None, restore_rng: bool = True) -> dict[str, Any]:
-    """Load a checkpoint into ``model``/``optimizer`` (either may be None); return the sidecar dict."""
+                    optimizer: Optimizers | None = None, restore_rng: bool = True) -> dict[str, Any]:
+    """Load a checkpoint into ``model``/``optimizer`` (either may be None; ``optimizer`` as given
+    to :func:`save_checkpoint`); return the sidecar dict."""
     sidecar = Path(sidecar)
     if not sidecar.is_file():
         raise FileNotFoundError(f"no checkpoint sidecar at {str(sidecar)!r}")
@@ -77,12 +98,19 @@ def load_checkpoint(sidecar: str | Path, model: torch.nn.Module | None = None,
     if model is not None:
         model.load_state_dict({k[6:]: v for k, v in tensors.items() if k.startswith("model.")})
     if optimizer is not None:
-        state: dict[int, dict[str, torch.Tensor]] = {}
-        for k, v in tensors.items():
-            if k.startswith("optim."):
-                _, pid, key = k.split(".", 2)
-                state.setdefault(int(pid), {})[key] = v
-        optimizer.load_state_dict({"state": state, "param_groups": meta["param_groups"]})
+        for name, o in _named(optimizer).items():
+            prefix = f"optim.{name}." if name else "optim."
+            state: dict[int, dict[str, torch.Tensor]] = {}
+            for k, v in tensors.items():
+                if k.startswith(prefix):
+                    pid, key = k[len(prefix):].split(".", 1)
+                    if not pid.isdigit():
+                        continue  # another optimizer's entry
+                    state.setdefault(int(pid), {})[key] = v
+            groups = meta["param_groups"] if not name else meta["param_groups"].get(name)
+            if groups is None:
+                raise ValueError(f"checkpoint {str(sidecar)!r} has no optimizer named {name!r}")
+            o.load_state_dict({"state": state, "param_groups": groups})
     if restore_rng and "rng.torch" in tensors:
         torch.set_rng_state(tensors["rng.torch"])
     return meta
