@@ -36,7 +36,7 @@ from .lighting import WEIGHTS_DIR, load_prior
 from .networks import InverseNet, ShadowNet
 from .objectives import decompose_and_solve
 
-__all__ = ["Relighter"]
+__all__ = ["RELIGHT_METHODS", "Relighter", "transfer_to_full_resolution", "working_resolution"]
 
 
 def _as_image(image: Any) -> tuple[torch.Tensor, str]:
@@ -107,13 +107,16 @@ class Relighter:
     Use :meth:`load`; the constructor takes ready modules.
     """
 
-    def __init__(self, inverse: InverseNet, shadow_net: ShadowNet, prior: LightingPrior, res: int = 64) -> None:
+    def __init__(self, inverse: InverseNet, shadow_net: ShadowNet, prior: LightingPrior, res: int = 64,
+                 renderer: torch.nn.Module | None = None) -> None:
         self.inverse, self.shadow_net, self.prior, self.res = inverse.eval(), shadow_net.eval(), prior, res
+        self.renderer = renderer.eval() if renderer is not None else None
 
     @classmethod
     def load(cls, path: str | os.PathLike | None = None) -> "Relighter":
-        """Load ``inverse.safetensors``, ``shadow.safetensors`` and ``lighting_prior.npz``
-        from ``path`` (a folder; None = the weights shipped in the package)."""
+        """Load ``inverse.safetensors``, ``shadow.safetensors``, ``lighting_prior.npz`` and, when
+        present, ``renderer.safetensors`` from ``path`` (a folder; None = the weights shipped
+        in the package)."""
         d = Path(path) if path is not None else WEIGHTS_DIR
         if not d.is_dir():
             raise FileNotFoundError(f"no weights folder at {str(d)!r}")
@@ -125,7 +128,12 @@ class Relighter:
         inverse.load_state_dict(inv_t)
         shadow = ShadowNet(int(sh_m["width"]), int(sh_m["depth"]))
         shadow.load_state_dict(sh_t)
-        return cls(inverse, shadow, load_prior(d / "lighting_prior.npz"), int(inv_m.get("res", 64)))
+        renderer = None
+        if (d / "renderer.safetensors").is_file():  # the neural renderer (second stage), when trained
+            from .neural_renderer import load_renderer
+
+            renderer = load_renderer(d / "renderer.safetensors")
+        return cls(inverse, shadow, load_prior(d / "lighting_prior.npz"), int(inv_m.get("res", 64)), renderer)
 
     @torch.no_grad()
     def decompose_linear(self, image: torch.Tensor, sky: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -175,36 +183,147 @@ class Relighter:
             raise ValueError("target holds NaN or inf")
         return torch.as_tensor(sh.rotate(coeffs, _rotation(world_to_camera)))
 
+    @staticmethod
+    def _dc_luminance(lighting: torch.Tensor) -> torch.Tensor:
+        """``(B, 9, 3)`` -> ``(B,)`` luminance of the DC term (the lighting's overall level)."""
+        lum = torch.tensor([0.2126, 0.7152, 0.0722], dtype=lighting.dtype)
+        return (lighting[:, 0] * lum).sum(-1)
+
+    @torch.no_grad()
+    def relight_linear(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
+                       source_lighting: torch.Tensor | None = None, method: str = "proposed") -> dict[str, torch.Tensor]:
+        """Relight linear images to a camera-frame SH target; tensors in, tensors out.
+
+        Args:
+            image: ``(B, 3, H, W)`` linear photo (runs at this resolution).
+            sky: ``(B, 1, H, W)`` bool, True on sky (kept from ``image``).
+            target: ``(B, 9, 3)`` or ``(9, 3)`` camera-frame radiance SH of the target lighting.
+            source_lighting: ``(B, 9, 3)`` or ``(9, 3)`` the source photo's lighting in the same
+                units as ``target``, or None. The decomposition's albedo and lighting share an
+                unknown scale, so the target is mapped into the decomposition's units by the
+                ratio of DC luminances: estimated source / ``source_lighting`` (None: estimated
+                source / ``target``, i.e. the photo keeps its exposure and only the lighting's
+                shape changes).
+            method: ``"proposed"`` (the neural renderer; ``"shadownet_lambertian"`` when no
+                renderer weights are loaded), ``"lambertian_sh"`` (``albedo * shading(n; target)``,
+                the InverseRenderNet-style baseline) or ``"shadownet_lambertian"`` (times
+                ShadowNet's shadow for the target).
+
+        Returns:
+            ``relit (B, 3, H, W)`` linear, sky pixels equal to ``image``; ``target (B, 9, 3)`` in
+            the decomposition's units; ``target_shadow (B, 1, H, W)`` (ones for ``lambertian_sh``);
+            the decomposition's ``albedo``, ``normals``, ``shadow``, ``lighting``, ``foreground``.
+        """
+        if method not in RELIGHT_METHODS:
+            raise ValueError(f"method must be one of {RELIGHT_METHODS}, got {method!r}")
+        if image.ndim != 4 or image.shape[1] != 3:
+            raise ValueError(f"image must have shape (B, 3, H, W), got {tuple(image.shape)}")
+        b = image.shape[0]
+        if sky.shape != (b, 1, *image.shape[-2:]):
+            raise ValueError(f"sky must have shape {(b, 1, *image.shape[-2:])}, got {tuple(sky.shape)}")
+
+        def batch_sh(x: torch.Tensor, name: str) -> torch.Tensor:
+            x = torch.as_tensor(x, dtype=torch.float32)
+            if x.shape == (9, 3):
+                x = x[None].expand(b, -1, -1)
+            if x.shape != (b, 9, 3):
+                raise ValueError(f"{name} must have shape (9, 3) or ({b}, 9, 3), got {tuple(x.shape)}")
+            if not torch.isfinite(x).all():
+                raise ValueError(f"{name} holds NaN or inf")
+            return x
+
+        tgt = batch_sh(target, "target")
+        out = self.decompose_linear(image.float(), sky.bool())
+        ref = tgt if source_lighting is None else batch_sh(source_lighting, "source_lighting")
+        ref_dc = self._dc_luminance(ref)
+        if bool((ref_dc <= 0).any()) or bool((self._dc_luminance(tgt) <= 0).any()):
+            raise ValueError("target (or source) lighting has no positive DC term (a dark or invalid lighting)")
+        scale = (self._dc_luminance(out["lighting"]).clamp_min(0) / ref_dc)[:, None, None]
+        tgt = tgt * scale
+        if method == "lambertian_sh":
+            s = torch.ones_like(out["shadow"])
+        else:
+            s = self.shadow_net(out["normals"], tgt)
+        if method == "proposed" and self.renderer is not None:
+            from .neural_renderer import render_relit
+
+            relit = render_relit(self.renderer, image.float(), sky.bool(), out, tgt, s)
+        else:
+            relit = image_model.render(out["albedo"], out["normals"], tgt, s)
+        relit = torch.where(sky, image.float(), relit.clamp_min(0))
+        return {"relit": relit, "target": tgt, "target_shadow": s, **{k: out[k] for k in (
+            "albedo", "normals", "shadow", "lighting", "foreground")}}
+
     def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
-                keep_exposure: bool = True) -> Any:
-        """Lambertian SH relighting with ShadowNet's shadow for the target lighting.
+                method: str = "proposed") -> Any:
+        """Relight a photo of any size to a target lighting.
+
+        The networks run at their training resolution (the short side resized to ``res``);
+        the result comes back at full resolution by ratio transfer: the full-resolution
+        linear photo times the upsampled ratio ``relit / photo`` of the working resolution,
+        so fine detail the networks never saw survives (where the working photo is black
+        the upsampled relit image is used instead).
 
         Args:
             image: the photo (see the module doc).
             target: SH ``(9, 3)``, env map ``(H, 2H, 3)``, EXR path or sun direction ``(3,)``, world frame.
             world_to_camera: ``(4, 4)`` or ``(3, 3)``; None = level camera (camera = world frame).
             sky_mask: optional ``(H, W)`` bool, True on sky (kept from the photo).
-            keep_exposure: scale the target so its DC luminance equals the source
-                lighting's (the photo keeps its exposure; only the lighting's shape changes).
+            method: see :meth:`relight_linear`.
+
+        The photo keeps its exposure: the target's DC luminance is set to the estimated
+        source lighting's, so only the lighting's shape and colour change (a single photo does
+        not tell the absolute light level; :meth:`relight_linear` takes ``source_lighting``
+        for that).
 
         Returns:
             The relit photo as display values in [0, 1] (sRGB), type and layout of ``image``.
         """
         lin, kind = _as_image(image)
         sky = _as_mask(sky_mask, lin)
+        target_cam = self.target_lighting(target, world_to_camera).float()
+        small, small_sky = working_resolution(lin, sky, self.res)
+        out = self.relight_linear(small, small_sky, target_cam, method=method)
+        relit = transfer_to_full_resolution(lin, small, out["relit"])
+        relit = torch.where(sky, lin, relit)
         with torch.no_grad():
-            out = self.decompose_linear(lin, sky)
-            target_cam = self.target_lighting(target, world_to_camera).float()
-            tgt = target_cam[None].expand(lin.shape[0], -1, -1).clone()
-            if keep_exposure:
-                lum = torch.tensor([0.2126, 0.7152, 0.0722])
-                src_dc = (out["lighting"][:, 0] * lum).sum(-1)
-                tgt_dc = (tgt[:, 0] * lum).sum(-1)
-                if bool((tgt_dc <= 0).any()):
-                    raise ValueError("target lighting has no positive DC term (a dark or invalid target)")
-                tgt = tgt * (src_dc / tgt_dc).clamp_min(0)[:, None, None]
-            s = self.shadow_net(out["normals"], tgt)
-            relit = image_model.render(out["albedo"], out["normals"], tgt, s)
-            relit = torch.where(sky, lin, relit)
             ldr = colour.to_ldr(relit.clamp_min(0))
         return _give_back(ldr, kind)
+
+
+RELIGHT_METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian")
+
+
+def working_resolution(image: torch.Tensor, sky: torch.Tensor, res: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Resize ``image (B, 3, H, W)`` and ``sky (B, 1, H, W)`` so the short side is ``res``
+    (area averaging when shrinking; the sky mask by majority of the area), long side rounded."""
+    h, w = image.shape[-2:]
+    k = res / min(h, w)
+    size = (max(1, round(h * k)), max(1, round(w * k)))
+    if size == (h, w):
+        return image, sky
+    mode = "area" if k < 1 else "bilinear"
+    kw = {} if mode == "area" else {"align_corners": False}
+    small = torch.nn.functional.interpolate(image, size=size, mode=mode, **kw)
+    small_sky = torch.nn.functional.interpolate(sky.float(), size=size, mode=mode, **kw) > 0.5
+    return small, small_sky
+
+
+def transfer_to_full_resolution(full: torch.Tensor, small: torch.Tensor, relit_small: torch.Tensor,
+                                eps: float = 1e-3) -> torch.Tensor:
+    """Bring a working-resolution relighting back to ``full``'s size by ratio transfer.
+
+    ``full (B, 3, H, W)`` linear photo, ``small``/``relit_small (B, 3, h, w)`` the working
+    photo and its relighting. Returns ``full * up(relit_small / small)`` where the working
+    photo is brighter than ``eps``, ``up(relit_small)`` elsewhere (a black pixel has no ratio).
+    """
+    if full.shape[-2:] == small.shape[-2:]:
+        return relit_small
+    size = full.shape[-2:]
+
+    def up(x: torch.Tensor) -> torch.Tensor:
+        return torch.nn.functional.interpolate(x, size=size, mode="bilinear", align_corners=False)
+
+    ratio = relit_small / small.clamp_min(eps)
+    lit = up(small) > eps
+    return torch.where(lit, full * up(ratio), up(relit_small))

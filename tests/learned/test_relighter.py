@@ -1,0 +1,121 @@
+"""The relighting path of ``learned.Relighter`` on the shipped weights.
+
+Identities that hold whatever the networks learned: the Lambertian methods are the image
+model applied to the decomposition, linear in the target; the source-lighting ratio maps the
+target into the decomposition's units; sky pixels are never touched; full-resolution
+transfer carries fine detail through a smooth relighting.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from physrelight import image_model
+
+
+@pytest.fixture(scope="module")
+def relighter():
+    from learned import Relighter
+
+    return Relighter.load()
+
+
+@pytest.fixture(scope="module")
+def photo() -> tuple[torch.Tensor, torch.Tensor]:
+    """A smooth-ish linear photo with a sky band on top, ``(2, 3, 48, 48)`` and its sky mask."""
+    g = torch.Generator().manual_seed(0)
+    base = torch.rand(2, 3, 6, 6, generator=g) * 0.5 + 0.1
+    image = torch.nn.functional.interpolate(base, size=(48, 48), mode="bilinear", align_corners=False)
+    sky = torch.zeros(2, 1, 48, 48, dtype=torch.bool)
+    sky[:, :, :10] = True
+    image = torch.where(sky, torch.tensor([0.4, 0.6, 0.9])[None, :, None, None], image)
+    return image, sky
+
+
+def _target(seed: int) -> torch.Tensor:
+    t = torch.zeros(9, 3)
+    t[0] = 2.0
+    t[1:4] = torch.from_numpy(np.random.default_rng(seed).normal(0, 0.4, (3, 3))).float()
+    return t
+
+
+def test_01_lambertian_sh_is_the_image_model_on_the_decomposition(relighter, photo) -> None:
+    image, sky = photo
+    out = relighter.relight_linear(image, sky, _target(1), method="lambertian_sh")
+    expect = image_model.render(out["albedo"], out["normals"], out["target"]).clamp_min(0)
+    fg = ~sky.expand_as(image)
+    torch.testing.assert_close(out["relit"][fg], expect[fg])
+    assert torch.equal(out["relit"][~fg], image[~fg])  # sky untouched, bit for bit
+    assert torch.equal(out["target_shadow"], torch.ones_like(out["target_shadow"]))
+
+
+def test_02_shadownet_method_multiplies_by_the_target_shadow(relighter, photo) -> None:
+    image, sky = photo
+    plain = relighter.relight_linear(image, sky, _target(2), method="lambertian_sh")
+    shadowed = relighter.relight_linear(image, sky, _target(2), method="shadownet_lambertian")
+    s = shadowed["target_shadow"]
+    assert float(s.min()) >= 0 and float(s.max()) <= 1
+    fg = ~sky.expand_as(image)
+    torch.testing.assert_close(shadowed["relit"][fg], (plain["relit"] * s)[fg])
+
+
+def test_03_source_lighting_sets_the_scale_and_the_default_keeps_exposure(relighter, photo) -> None:
+    image, sky = photo
+    t = _target(3)
+    same = relighter.relight_linear(image, sky, t, source_lighting=t, method="lambertian_sh")
+    darker = relighter.relight_linear(image, sky, t, source_lighting=2 * t, method="lambertian_sh")
+    fg = ~sky.expand_as(image)
+    # Twice the source level for the same target: the relit image is half as bright.
+    torch.testing.assert_close(darker["relit"][fg], 0.5 * same["relit"][fg], rtol=1e-5, atol=1e-7)
+    # Without a source lighting the target's DC luminance equals the estimated source's.
+    default = relighter.relight_linear(image, sky, 10 * t, method="lambertian_sh")
+    lum = torch.tensor([0.2126, 0.7152, 0.0722])
+    torch.testing.assert_close((default["target"][:, 0] * lum).sum(-1), (default["lighting"][:, 0] * lum).sum(-1))
+
+
+def test_04_relight_to_the_estimated_lighting_reproduces_the_lambertian_reconstruction(relighter, photo) -> None:
+    image, sky = photo
+    dec = relighter.decompose_linear(image, sky)
+    out = relighter.relight_linear(image, sky, dec["lighting"], method="lambertian_sh")
+    torch.testing.assert_close(out["target"], dec["lighting"])
+    expect = image_model.render(dec["albedo"], dec["normals"], dec["lighting"]).clamp_min(0)
+    fg = ~sky.expand_as(image)
+    torch.testing.assert_close(out["relit"][fg], expect[fg])
+
+
+def test_05_full_resolution_transfer_keeps_detail_through_a_smooth_relighting() -> None:
+    from learned.relighter import transfer_to_full_resolution, working_resolution
+
+    g = torch.Generator().manual_seed(1)
+    full = torch.rand(1, 3, 96, 128, generator=g) * 0.8 + 0.1  # per-pixel detail
+    sky = torch.zeros(1, 1, 96, 128, dtype=torch.bool)
+    small, small_sky = working_resolution(full, sky, 32)
+    assert small.shape[-2:] == (32, 43) and small_sky.shape[-2:] == (32, 43)
+    gain = torch.linspace(0.5, 2.0, 43)[None, None, None, :].expand(1, 3, 32, 43)  # a smooth relighting
+    back = transfer_to_full_resolution(full, small, small * gain)
+    up_gain = torch.nn.functional.interpolate(gain, size=(96, 128), mode="bilinear", align_corners=False)
+    torch.testing.assert_close(back, full * up_gain)
+    # A plain upsampling would have lost the detail: its error is far larger.
+    naive = torch.nn.functional.interpolate(small * gain, size=(96, 128), mode="bilinear", align_corners=False)
+    assert float((naive - full * up_gain).abs().mean()) > 20 * float((back - full * up_gain).abs().mean()) + 1e-3
+
+
+def test_06_relight_any_size_photo_and_bad_input(relighter) -> None:
+    rng = np.random.default_rng(4)
+    photo = (rng.uniform(0.1, 0.9, (50, 70, 3)) * 255).astype(np.uint8)
+    out = relighter.relight(photo, _target(5).numpy(), method="lambertian_sh")
+    assert out.shape == (50, 70, 3) and np.isfinite(out).all() and 0 <= out.min() and out.max() <= 1
+    with pytest.raises(ValueError, match="method"):
+        relighter.relight(photo, _target(5).numpy(), method="vgg")
+    img = torch.rand(1, 3, 16, 16)
+    sky = torch.zeros(1, 1, 16, 16, dtype=torch.bool)
+    with pytest.raises(ValueError, match=r"target must have shape"):
+        relighter.relight_linear(img, sky, torch.zeros(4, 3))
+    with pytest.raises(ValueError, match="sky must have shape"):
+        relighter.relight_linear(img, sky[:, :, :8], _target(6))
+    with pytest.raises(ValueError, match="DC"):
+        relighter.relight_linear(img, sky, -_target(6))
+    with pytest.raises(ValueError, match="NaN"):
+        relighter.relight_linear(img, sky, _target(6) * float("nan"))
