@@ -36,7 +36,8 @@ from .lighting import WEIGHTS_DIR, load_prior
 from .networks import InverseNet, ShadowNet
 from .objectives import decompose_and_solve
 
-__all__ = ["RELIGHT_METHODS", "Relighter", "transfer_to_full_resolution", "working_resolution"]
+__all__ = ["RELIGHT_METHODS", "SKY_TYPES", "Relighter", "rotate_azimuth", "sun_lighting",
+           "transfer_to_full_resolution", "working_resolution"]
 
 
 def _as_image(image: Any) -> tuple[torch.Tensor, str]:
@@ -155,9 +156,10 @@ class Relighter:
         result["sky_mask"] = _give_back(sky, kind)
         return result
 
-    def target_lighting(self, target: Any, world_to_camera: Any = None) -> torch.Tensor:
+    def target_lighting(self, target: Any, world_to_camera: Any = None, sky: str = "clear") -> torch.Tensor:
         """``(9, 3)`` camera-frame radiance SH of a target (SH ``(9, 3)``, env map or EXR path, or a sun
-        direction ``(3,)`` towards the sun; all in the world frame)."""
+        direction ``(3,)`` towards the sun with ``sky`` in :data:`SKY_TYPES`, see
+        :func:`sun_lighting`; all in the world frame)."""
         if isinstance(target, (str, os.PathLike)):
             from physrelight import envmap
 
@@ -165,13 +167,7 @@ class Relighter:
         t = torch.as_tensor(np.asarray(target, dtype=np.float64) if not isinstance(target, torch.Tensor)
                             else target.double())
         if t.shape == (3,):
-            # A sun direction: a white delta sun (irradiance 1) over a uniform sky that adds
-            # 30 % of the sun's irradiance on a horizontal surface (soft fill light).
-            norm = float(t.norm())
-            if not norm > 0:
-                raise ValueError("a sun direction target must be a non-zero (3,) vector")
-            coeffs = torch.as_tensor(sh.project_sun((t / norm).numpy(), np.ones(3), order=2))
-            coeffs[0] += (0.3 / math.pi) * 2.0 * math.sqrt(math.pi)  # uniform L: E_up = pi L, L00 = 2 sqrt(pi) L
+            coeffs = torch.as_tensor(sun_lighting(t.numpy(), sky))
         elif t.ndim == 2 and t.shape == (9, 3):
             coeffs = t
         elif t.ndim == 3 and t.shape[-1] == 3 and t.shape[1] == 2 * t.shape[0]:
@@ -255,43 +251,132 @@ class Relighter:
             "albedo", "normals", "shadow", "lighting", "foreground")}}
 
     def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
-                method: str = "proposed") -> Any:
-        """Relight a photo of any size to a target lighting.
+                method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear") -> Any:
+        """Relight a photo of any size to a target lighting; the relit photo only.
+
+        See :meth:`relight_layers` for the arguments; returns display values in [0, 1]
+        (sRGB), type and layout of ``image``.
+        """
+        lin, kind = _as_image(image)
+        layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky)
+        return _give_back(layers["relit"], kind)
+
+    def relight_layers(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
+                       method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear") -> dict[str, np.ndarray]:
+        """Relight a photo of any size and give every layer at full resolution.
 
         The networks run at their training resolution (the short side resized to ``res``);
         the result comes back at full resolution by ratio transfer: the full-resolution
         linear photo times the upsampled ratio ``relit / photo`` of the working resolution,
         so fine detail the networks never saw survives (where the working photo is black
-        the upsampled relit image is used instead).
+        the upsampled relit image is used instead). The photo keeps its exposure: the
+        target's DC luminance is set to the estimated source lighting's, so only the
+        lighting's shape and colour change (one photo does not tell the absolute light level;
+        :meth:`relight_linear` takes ``source_lighting`` for that).
 
         Args:
-            image: the photo (see the module doc).
+            image: the photo (see the module doc); a single image.
             target: SH ``(9, 3)``, env map ``(H, 2H, 3)``, EXR path or sun direction ``(3,)``, world frame.
             world_to_camera: ``(4, 4)`` or ``(3, 3)``; None = level camera (camera = world frame).
             sky_mask: optional ``(H, W)`` bool, True on sky (kept from the photo).
             method: see :meth:`relight_linear`.
-
-        The photo keeps its exposure: the target's DC luminance is set to the estimated
-        source lighting's, so only the lighting's shape and colour change (a single photo does
-        not tell the absolute light level; :meth:`relight_linear` takes ``source_lighting``
-        for that).
+            azimuth_deg: turn the target about the world's vertical axis first (degrees,
+                counter-clockwise seen from above).
+            sky: sky type of a sun-direction target (:func:`sun_lighting`).
 
         Returns:
-            The relit photo as display values in [0, 1] (sRGB), type and layout of ``image``.
+            numpy ``(H, W, C)`` display values in [0, 1]: ``relit``, ``albedo``, ``normals``
+            (``0.5 * n + 0.5``), ``shadow`` (source), ``target_shadow``, ``shading`` (target
+            shading, tone-mapped), ``sky_mask`` (C = 1).
         """
-        lin, kind = _as_image(image)
+        lin, _ = _as_image(image)
+        if lin.shape[0] != 1:
+            raise ValueError(f"relight_layers takes one image, got a batch of {lin.shape[0]}")
+        layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky)
+        return {k: v[0].permute(1, 2, 0).numpy() for k, v in layers.items()}
+
+    def _relight_tensors(self, lin: torch.Tensor, target: Any, world_to_camera: Any, sky_mask: Any, method: str,
+                         azimuth_deg: float, sky_type: str) -> dict[str, torch.Tensor]:
         sky = _as_mask(sky_mask, lin)
-        target_cam = self.target_lighting(target, world_to_camera).float()
+        if not math.isfinite(float(azimuth_deg)):
+            raise ValueError(f"azimuth must be a finite number of degrees, got {azimuth_deg!r}")
+        target_cam = self.target_lighting(rotate_azimuth(target, azimuth_deg) if azimuth_deg else target,
+                                          world_to_camera, sky_type).float()
         small, small_sky = working_resolution(lin, sky, self.res)
         out = self.relight_linear(small, small_sky, target_cam, method=method)
-        relit = transfer_to_full_resolution(lin, small, out["relit"])
-        relit = torch.where(sky, lin, relit)
+        relit = torch.where(sky, lin, transfer_to_full_resolution(lin, small, out["relit"]))
+        size = lin.shape[-2:]
+
+        def up(x: torch.Tensor) -> torch.Tensor:
+            return torch.nn.functional.interpolate(x, size=size, mode="bilinear", align_corners=False)
+
+        shading = image_model.shading(out["normals"], out["target"])
         with torch.no_grad():
-            ldr = colour.to_ldr(relit.clamp_min(0))
-        return _give_back(ldr, kind)
+            return {
+                "relit": colour.to_ldr(relit.clamp_min(0)),
+                "albedo": colour.to_ldr(up(out["albedo"]).clamp(0, 1)),
+                "normals": (0.5 * up(out["normals"]) + 0.5).clamp(0, 1),
+                "shadow": up(out["shadow"]).clamp(0, 1),
+                "target_shadow": up(out["target_shadow"]).clamp(0, 1),
+                "shading": colour.to_ldr(up(shading).clamp_min(0)),
+                "sky_mask": sky.float(),
+            }
 
 
 RELIGHT_METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian")
+SKY_TYPES = ("clear", "overcast")
+
+
+def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
+    """Order-2 radiance SH ``(9, 3)`` (world frame) of a simple outdoor lighting.
+
+    ``"clear"``: a white delta sun of irradiance 1 towards ``direction`` plus a uniform
+    bluish sky (0.75, 0.9, 1.2) adding 0.3 (green) of order-2 irradiance on a horizontal
+    surface (soft fill light). ``"overcast"``: the CIE overcast sky
+    ``L(theta) = L_z (1 + 2 cos theta) / 3`` (zenith angle theta, dark below the horizon),
+    grey, no sun, scaled to order-2 irradiance 1 on a horizontal surface; the direction is
+    ignored. Skies are projected from a 64 x 128 map.
+    """
+    if sky not in SKY_TYPES:
+        raise ValueError(f"sky must be one of {SKY_TYPES}, got {sky!r}")
+    d = np.asarray(direction, dtype=np.float64)
+    if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
+        raise ValueError(f"a sun direction must be a finite non-zero (3,) vector, got {d.tolist()}")
+    from physrelight import envmap
+
+    dirs = envmap.directions(64, 128)
+    cos_z = dirs[..., 1]
+    if sky == "overcast":
+        lum = np.where(cos_z > 0, (1.0 + 2.0 * np.clip(cos_z, 0, 1)) / 3.0, 0.0)
+        env = np.repeat(lum[..., None], 3, axis=-1)
+        coeffs = sh.project_envmap(env, order=2)
+        return coeffs / float(sh.irradiance(coeffs, np.array([[0.0, 1.0, 0.0]]))[0, 1])
+    blue = np.array([0.75, 0.9, 1.2])
+    env = np.where(cos_z[..., None] > 0, blue, 0.0) * np.ones(3)
+    sky_coeffs = sh.project_envmap(env, order=2)
+    # Scale so the order-2 irradiance the image model sees on a horizontal surface is 0.3 in green.
+    sky_coeffs *= 0.3 / float(sh.irradiance(sky_coeffs, np.array([[0.0, 1.0, 0.0]]))[0, 1])
+    return sh.project_sun(d / np.linalg.norm(d), np.ones(3), order=2) + sky_coeffs
+
+
+def rotate_azimuth(target: Any, degrees: float) -> Any:
+    """Turn a world-frame target (SH ``(9, 3)``, env map, EXR path or sun direction ``(3,)``) by
+    ``degrees`` about +Y (the SH rotation is exact; env maps are projected first)."""
+    if isinstance(target, (str, os.PathLike)):
+        from physrelight import envmap
+
+        target = envmap.read(target)
+    a = math.radians(float(degrees))
+    R = np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0], [-math.sin(a), 0.0, math.cos(a)]])
+    t = np.asarray(target, dtype=np.float64) if not isinstance(target, torch.Tensor) else target.double().numpy()
+    if t.shape == (3,):
+        return R @ t
+    if t.ndim == 3 and t.shape[-1] == 3 and t.shape[1] == 2 * t.shape[0]:
+        t = sh.project_envmap(t, order=2)
+    if t.shape != (9, 3):
+        raise ValueError(f"target must be SH coefficients (9, 3), an env map (H, 2H, 3) or a sun direction (3,), "
+                         f"got {t.shape}")
+    return sh.rotate(t, R)
 
 
 def working_resolution(image: torch.Tensor, sky: torch.Tensor, res: int) -> tuple[torch.Tensor, torch.Tensor]:

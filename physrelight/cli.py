@@ -90,7 +90,7 @@ _SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_demo, _
 
 # Subcommands owned by other packages: each module has ``add_parser(subparsers)`` and
 # keeps its heavy imports (Mitsuba, training code) inside the handler.
-_PACKAGE_SUBCOMMANDS = ("validation.cli", "learned.cli")
+_PACKAGE_SUBCOMMANDS = ("validation.cli", "learned.cli", "learned.relight_cli")
 
 
 def build_parser() -> argparse.ArgumentParser:

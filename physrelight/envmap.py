@@ -63,12 +63,12 @@ def check_envmap(env: torch.Tensor, name: str = "env") -> None:
 
 
 def read(path: str | os.PathLike) -> np.ndarray:
-    """Read an EXR environment map (or any RGB EXR) as ``float32 (H, W, 3)``.
+    """Read an EXR (or Radiance ``.hdr``) environment map as ``float32 (H, W, 3)``.
 
     The alpha channel, if any, is dropped. Slightly negative values from lossy (DWA)
     compression are clamped to 0; NaN/inf or strongly negative values raise.
     """
-    rgb = io.read_exr(path)
+    rgb = io.read_hdr(path) if str(path).lower().endswith(".hdr") else io.read_exr(path)
     if rgb.ndim != 3:
         raise ValueError(f"{str(path)!r} must have R, G, B channels, found a single channel")
     if not np.all(np.isfinite(rgb)):

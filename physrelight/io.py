@@ -80,6 +80,67 @@ def read_exr(path: str | os.PathLike) -> np.ndarray:
     raise ValueError(f"{str(p)!r} must have R, G, B channels or a single channel, found {sorted(channels)}")
 
 
+def read_hdr(path: str | os.PathLike) -> np.ndarray:
+    """Read a Radiance RGBE ``.hdr`` file as float32 ``(H, W, 3)`` linear radiance.
+
+    Supports the standard ``-Y H +X W`` orientation, flat and run-length-encoded
+    scanlines (the "new" RLE every current writer uses); ``(m + 0.5) * 2**(e - 136)`` as in
+    Radiance's ``colr_color``, 0 where the exponent is 0. Anything else raises a
+    ``ValueError`` naming the problem.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"HDR image {str(p)!r} does not exist")
+    data = p.read_bytes()
+    if not (data.startswith(b"#?RADIANCE") or data.startswith(b"#?RGBE")):
+        raise ValueError(f"{str(p)!r} is not a Radiance .hdr file (no #?RADIANCE header)")
+    end = data.find(b"\n\n")
+    if end < 0:
+        raise ValueError(f"{str(p)!r}: truncated header")
+    header = data[:end].decode("ascii", "replace")
+    fmt = [ln for ln in header.splitlines() if ln.startswith("FORMAT=")]
+    if fmt and fmt[0].strip() != "FORMAT=32-bit_rle_rgbe":
+        raise ValueError(f"{str(p)!r}: unsupported {fmt[0].strip()} (only 32-bit_rle_rgbe)")
+    nl = data.find(b"\n", end + 2)
+    res = data[end + 2:nl].decode("ascii", "replace").split()
+    if len(res) != 4 or res[0] != "-Y" or res[2] != "+X" or not (res[1].isdigit() and res[3].isdigit()):
+        raise ValueError(f"{str(p)!r}: unsupported resolution line {' '.join(res)!r} (only '-Y H +X W')")
+    h, w = int(res[1]), int(res[3])
+    buf = np.frombuffer(data, dtype=np.uint8, offset=nl + 1)
+    out = np.empty((h, w, 4), dtype=np.uint8)
+    pos = 0
+    try:
+        for y in range(h):
+            if 8 <= w < 32768 and buf[pos] == 2 and buf[pos + 1] == 2 and not buf[pos + 2] & 0x80:
+                if (int(buf[pos + 2]) << 8 | int(buf[pos + 3])) != w:
+                    raise ValueError("scanline width mismatch")
+                pos += 4
+                for c in range(4):
+                    x = 0
+                    while x < w:
+                        n = int(buf[pos])
+                        if n > 128:  # a run
+                            n -= 128
+                            out[y, x:x + n, c] = buf[pos + 1]
+                            pos += 2
+                        else:
+                            if n == 0 or x + n > w:
+                                raise ValueError("bad run length")
+                            out[y, x:x + n, c] = buf[pos + 1:pos + 1 + n]
+                            pos += 1 + n
+                        x += n
+                    if x != w:
+                        raise ValueError("run overflows the scanline")
+            else:
+                out[y] = buf[pos:pos + 4 * w].reshape(w, 4)
+                pos += 4 * w
+    except (IndexError, ValueError) as err:
+        raise ValueError(f"{str(p)!r}: corrupt or truncated pixel data ({err})") from None
+    e = out[..., 3].astype(np.int32)
+    scale = np.where(e > 0, np.ldexp(1.0, e - 136), 0.0)
+    return ((out[..., :3].astype(np.float64) + 0.5) * scale[..., None]).astype(np.float32)
+
+
 def read_image(path: str | os.PathLike) -> np.ndarray:
     """Read a PNG/JPEG photo as float32 ``(H, W, 3)`` display values in [0, 1] (sRGB-encoded).
 

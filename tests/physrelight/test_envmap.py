@@ -172,3 +172,50 @@ def test_11_torch_in_torch_out() -> None:
 def test_12_bad_input_raises_a_clear_value_error(call, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def _rgbe_bytes(img: np.ndarray, rle: bool) -> bytes:
+    """A minimal Radiance writer for the test (runs of >= 2 equal bytes, else 1-byte literals)."""
+    h, w, _ = img.shape
+    v = img.max(-1)
+    m, e = np.frexp(v)
+    scale = np.where(v > 1e-32, m * 256.0 / np.maximum(v, 1e-32), 0.0)
+    rgbe = np.zeros((h, w, 4), np.uint8)
+    rgbe[..., :3] = np.floor(img * scale[..., None])
+    rgbe[..., 3] = np.where(v > 1e-32, e + 128, 0)
+    out = bytearray(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n" + f"-Y {h} +X {w}\n".encode())
+    for y in range(h):
+        if not rle:
+            out += rgbe[y].tobytes()
+            continue
+        out += bytes([2, 2, w >> 8, w & 255])
+        for c in range(4):
+            row, x = rgbe[y, :, c], 0
+            while x < w:
+                r = 1
+                while x + r < w and r < 127 and row[x + r] == row[x]:
+                    r += 1
+                out += bytes([128 + r, row[x]]) if r >= 2 else bytes([1, row[x]])
+                x += r
+    return bytes(out)
+
+
+@pytest.mark.parametrize("rle", [False, True])
+def test_13_radiance_hdr_reads_within_rgbe_quantisation(tmp_path, rle: bool) -> None:
+    rng = np.random.default_rng(5)
+    img = np.exp(rng.normal(0, 3, (6, 16, 3)))
+    img[:, :5] = img[:, :1]  # constant stretches: runs in the RLE
+    img[0, 0] = 0.0
+    path = tmp_path / "map.hdr"
+    path.write_bytes(_rgbe_bytes(img, rle))
+    got = envmap.read(path)
+    assert got.shape == (6, 16, 3) and got.dtype == np.float32
+    assert got[0, 0].max() == 0.0
+    # RGBE keeps 8 mantissa bits of the brightest channel: error <= 2^-8 of it.
+    assert np.all(np.abs(got - img) <= 2.0 ** -8 * img.max(-1, keepdims=True) + 1e-12)
+    path.write_bytes(_rgbe_bytes(img, rle)[:-7])
+    with pytest.raises(ValueError, match="corrupt or truncated"):
+        envmap.read(path)
+    path.write_bytes(b"P6 not a radiance file")
+    with pytest.raises(ValueError, match="not a Radiance"):
+        envmap.read(path)

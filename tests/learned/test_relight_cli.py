@@ -1,0 +1,112 @@
+"""``physrelight relight``: targets, full-resolution output, layers, sequences, one-line errors."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physrelight import envmap, io, sh
+from physrelight.cli import main
+
+
+FOREST = Path(__file__).resolve().parents[2] / "physrelight" / "data" / "hdri" / "forest.exr"
+
+
+@pytest.fixture(scope="module")
+def photo(tmp_path_factory) -> Path:
+    """A 52 x 76 RGB photo with per-pixel detail and a bright band of sky on top."""
+    rng = np.random.default_rng(0)
+    img = rng.uniform(0.15, 0.8, (52, 76, 3))
+    img[:12] = [0.55, 0.7, 0.95]
+    path = tmp_path_factory.mktemp("photo") / "photo.png"
+    io.write_png(path, img)
+    return path
+
+
+def test_01_sun_direction_and_azimuth_follow_the_documented_frame() -> None:
+    from learned.relight_cli import sun_direction
+    from learned.relighter import rotate_azimuth, sun_lighting
+
+    np.testing.assert_allclose(sun_direction(0, 0), [0, 0, -1], atol=1e-12)  # ahead of the camera
+    np.testing.assert_allclose(sun_direction(0, 90), [1, 0, 0], atol=1e-12)  # to its right
+    np.testing.assert_allclose(sun_direction(90, 33), [0, 1, 0], atol=1e-12)
+    # Turning a sun target by 90 deg about +Y (counter-clockwise from above) = the sun moved there.
+    d = sun_direction(30, 0)
+    np.testing.assert_allclose(rotate_azimuth(d, 90), sun_direction(30, -90), atol=1e-12)
+    # On SH the turn is the exact SH rotation: same as lighting the turned sun.
+    np.testing.assert_allclose(rotate_azimuth(sun_lighting(d), 90), sun_lighting(sun_direction(30, -90)), atol=1e-9)
+    # An env map turned by whole columns: projection of the shifted map.
+    env = envmap.read(FOREST)
+    h, w = env.shape[:2]
+    a = np.radians(360.0 * 8 / w)
+    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    np.testing.assert_allclose(rotate_azimuth(env, math.degrees(a)),
+                               sh.project_envmap(envmap.rotate(env, R), order=2), rtol=1e-5, atol=1e-6)
+
+
+def test_02_relight_writes_full_resolution_output_and_layers(photo: Path, tmp_path: Path) -> None:
+    out = tmp_path / "relit.png"
+    assert main(["relight", str(photo), "--env", str(FOREST), "--azimuth", "45", "--layers", str(tmp_path / "L"),
+                 "-o", str(out), "--threads", "1"]) == 0
+    relit = io.read_image(out)
+    assert relit.shape == (52, 76, 3)
+    names = {p.stem for p in (tmp_path / "L").glob("*.png")}
+    assert {"relit", "albedo", "normals", "shadow", "target_shadow", "shading", "sky_mask"} <= names
+    # A user mask keeps those pixels exactly (the photo's sky is not relit).
+    mask = np.zeros((52, 76), bool)
+    mask[:12] = True
+    io.write_png(tmp_path / "mask.png", mask.astype(np.float32))
+    assert main(["relight", str(photo), "--sun", "20", "120", "--mask", str(tmp_path / "mask.png"),
+                 "--method", "lambertian_sh", "-o", str(out), "--threads", "1"]) == 0
+    np.testing.assert_array_equal(io.read_image(out)[:12], io.read_image(photo)[:12])
+
+
+def test_03_sequence_writes_an_animated_gif_that_changes(photo: Path, tmp_path: Path) -> None:
+    from PIL import Image
+
+    out = tmp_path / "seq.gif"
+    assert main(["relight", str(photo), "--sun", "15", "0", "--sequence", "3", "-o", str(out), "--quiet",
+                 "--method", "shadownet_lambertian", "--threads", "1"]) == 0
+    with Image.open(out) as im:
+        assert im.n_frames == 3
+        frames = []
+        for k in range(3):
+            im.seek(k)
+            frames.append(np.asarray(im.convert("RGB"), dtype=np.float64))
+    assert frames[0].shape == (52, 76, 3)
+    assert np.abs(frames[0] - frames[1]).mean() > 1.0  # the sun moved: the image changed
+
+
+@pytest.mark.parametrize("make, args, match", [
+    ("grey", ["--sun", "20", "0"], "RGB colour photo"),
+    ("corrupt", ["--sun", "20", "0"], "cannot read"),
+    ("missing", ["--sun", "20", "0"], "does not exist"),
+    ("ok", ["--env", "nowhere.exr"], "environment map 'nowhere.exr' does not exist"),
+    ("ok", ["--env", "PHOTO"], "must be an .exr or .hdr"),
+    ("ok", ["--sh", "nowhere.npy"], "does not exist"),
+    ("ok", ["--sun", "120", "0"], "elevation"),
+    ("ok", ["--sun", "20", "0", "--mask", "SMALLMASK"], "mask"),
+    ("ok", ["--sun", "20", "0", "--sequence", "2"], r"\.gif"),
+])
+def test_04_bad_input_is_one_line_and_non_zero(photo: Path, tmp_path: Path, capsys, make: str, args: list[str],
+                                               match: str) -> None:
+    from PIL import Image
+
+    src = {"ok": photo, "missing": tmp_path / "missing.png"}.get(make, tmp_path / f"{make}.png")
+    if make == "grey":
+        Image.open(photo).convert("L").save(src)
+    elif make == "corrupt":
+        src.write_bytes(b"\x89PNG\r\n\x1a\n truncated")
+    small = tmp_path / "small.png"
+    io.write_png(small, np.ones((4, 4)))
+    args = [str(photo) if a == "PHOTO" else str(small) if a == "SMALLMASK" else a for a in args]
+    rc = main(["relight", str(src), *args, "-o", str(tmp_path / "o.png")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith("physrelight: error:")
+    import re
+
+    assert re.search(match, err), err
