@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 
@@ -34,3 +35,17 @@ def test_03_argument_errors_exit_nonzero(args) -> None:
     with pytest.raises(SystemExit) as exc:
         cli.main(args)
     assert exc.value.code != 0
+
+
+def test_05_pipeline_demo_relights_a_path_traced_scene_and_a_real_photo(tmp_path) -> None:
+    pytest.importorskip("mitsuba")
+    assert cli.main(["demo", "-o", str(tmp_path), "--size", "24", "--targets", "forest",
+                     "--scene-size", "48"]) == 0
+    res = json.loads((tmp_path / "relight_metrics.json").read_text())
+    assert (tmp_path / "relight_demo.png").stat().st_size > 20_000
+    assert len(res["targets"]) == 3 and "real_photo" in res
+    for entry in res["targets"].values():
+        for method in ("proposed", "lambertian_sh", "identity"):
+            m = entry[method]
+            assert all(math.isfinite(v) for v in m.values())
+            assert 0 <= m["l1"] < 1 and 0 < m["ssim"] <= 1
