@@ -85,17 +85,20 @@ def _lighting_errors(pred: torch.Tensor, gt: torch.Tensor) -> tuple[float, float
 
 
 def load_ground_truth(ds: SynthDataset, scene: str, view: int, light: int, res: int) -> dict[str, torch.Tensor]:
-    """Ground truth of one photo at ``res``: albedo, normals, shadow, lighting in photo units."""
-    gt = ds.load(scene, view, light, keys=("albedo", "normal", "shadow", "sh", "photo_params"))
+    """Ground truth of one photo at ``res``: albedo, normals, shadow (sun visibility), direct_shadow
+    (the direct-light ratio, the quantity the image model's ``s`` stands for), lighting in photo units."""
+    gt = ds.load(scene, view, light, keys=("albedo", "normal", "shadow", "direct_shadow", "sh", "photo_params"))
     albedo, normal, shadow = to_chw(gt["albedo"]), to_chw(gt["normal"]), to_chw(gt["shadow"])
+    direct = to_chw(gt["direct_shadow"])
     if albedo.shape[-1] != res:
         albedo = F.interpolate(albedo[None], size=(res, res), mode="area")[0]
         shadow = F.interpolate(shadow[None], size=(res, res), mode="area")[0]
+        direct = F.interpolate(direct[None], size=(res, res), mode="area")[0]
         normal = F.interpolate(normal[None], size=(res, res), mode="nearest")[0]
     params = gt["photo_params"]
     gain = 2.0 ** params["ev"] * np.asarray(params["wb_gains"], dtype=np.float64)
     lighting = torch.from_numpy(gt["sh"]["2"] * gain[None, :])
-    return {"albedo": albedo, "normal": normal, "shadow": shadow, "lighting": lighting}
+    return {"albedo": albedo, "normal": normal, "shadow": shadow, "direct_shadow": direct, "lighting": lighting}
 
 
 def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.Tensor]], root: str | Path,
@@ -115,7 +118,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
             reported as ``shadownet_ap``.
 
     Returns:
-        Flat dict: ``albedo_si_mse``, ``normal_mae_deg``, ``shadow_ap``,
+        Flat dict: ``albedo_si_mse``, ``normal_mae_deg``, ``shadow_ap`` (labels: sun visibility
+        < 0.5), ``shadow_ap_direct`` (labels: direct-light ratio < 0.5),
         ``lighting_rel_err``, ``lighting_si_rel_err``, the same with ``baseline_``
         prefixed, ``shadow_positive_rate``, ``images``.
     """
@@ -130,7 +134,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
     acc: dict[str, list[float]] = {k: [] for k in (
         "albedo_si_mse", "normal_mae_deg", "lighting_rel_err", "lighting_si_rel_err", "baseline_albedo_si_mse",
         "baseline_normal_mae_deg", "baseline_lighting_rel_err", "baseline_lighting_si_rel_err")}
-    scores, scores_sn, labels = [], [], []
+    scores, scores_sn, labels, labels_direct = [], [], [], []
     for start in range(0, len(items), batch_size):
         chunk = items[start:start + batch_size]
         photos = [load_photo(ds, it.scene, it.view, it.light, res) for it in chunk]
@@ -155,6 +159,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                 acc[f"{name}lighting_rel_err"].append(raw)
                 acc[f"{name}lighting_si_rel_err"].append(si)
             labels.append((gt["shadow"][fg] < 0.5).numpy())
+            labels_direct.append((gt["direct_shadow"][fg] < 0.5).numpy())
             scores.append((1.0 - out["shadow"][j][fg]).numpy())
             if sn is not None:
                 scores_sn.append((1.0 - sn[j][fg]).numpy())
@@ -163,7 +168,13 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
     res_["shadow_ap"] = average_precision(np.concatenate(scores), y)
     res_["baseline_shadow_ap"] = average_precision(np.zeros(y.size), y)
     res_["shadow_positive_rate"] = float(y.mean())
+    # The same against the direct-light ratio (< 0.5): a sky-lit umbra counts only if it lost
+    # most of its direct light, which is what s in i = s * albedo * shading can explain.
+    yd = np.concatenate(labels_direct)
+    res_["shadow_ap_direct"] = average_precision(np.concatenate(scores), yd)
+    res_["baseline_shadow_ap_direct"] = average_precision(np.zeros(yd.size), yd)
     if scores_sn:
         res_["shadownet_ap"] = average_precision(np.concatenate(scores_sn), y)
+        res_["shadownet_ap_direct"] = average_precision(np.concatenate(scores_sn), yd)
     res_["images"] = float(len(acc["albedo_si_mse"]))
     return res_
