@@ -15,7 +15,8 @@ horizon and AZIM degrees clockwise (seen from above) from straight ahead of the 
 
 Any input size: the networks run at their resolution and the result is brought back to full
 resolution by ratio transfer (fine detail survives). The photo keeps its exposure; only
-the lighting's shape and colour change. ``--sequence N`` sweeps the azimuth over 360
+the lighting's shape and colour change. The sky is found by the shipped segmenter (or
+``--mask``) and repainted by SkyGAN for the target lighting (``--keep-sky`` keeps it). ``--sequence N`` sweeps the azimuth over 360
 degrees in N frames and writes an animated GIF.
 """
 
@@ -111,7 +112,7 @@ def _relight(args: argparse.Namespace) -> int:
     from .relighter import Relighter
 
     relighter = Relighter.load(args.weights)
-    common = dict(sky_mask=mask, method=args.method, sky=args.sky)
+    common = dict(sky_mask=mask, method=args.method, sky=args.sky, new_sky=not args.keep_sky, seed=args.seed)
     if args.sequence:
         from tqdm import tqdm
 
@@ -147,7 +148,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="target sun elevation and azimuth in degrees (see above), with --sky")
     p.add_argument("--sky", choices=SKY_TYPES, default="clear", help="sky type for --sun (default: clear)")
     p.add_argument("--azimuth", type=float, default=0.0, help="turn the target about the vertical (degrees)")
-    p.add_argument("--mask", default=None, help="sky mask PNG (white = sky), the photo's size")
+    p.add_argument("--mask", default=None, help="sky mask PNG (white = sky), the photo's size "
+                                                "(default: the shipped sky segmenter's)")
+    p.add_argument("--keep-sky", action="store_true", help="keep the photo's sky (default: SkyGAN paints a new one)")
+    p.add_argument("--seed", type=int, default=0, help="SkyGAN noise seed (default: 0)")
     p.add_argument("--layers", default=None, help="also write albedo, normals, shadows, shading, sky mask here")
     p.add_argument("--sequence", type=positive_int, default=None, metavar="N",
                    help="sweep the azimuth over 360 degrees in N frames; write an animated GIF")

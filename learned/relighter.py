@@ -109,15 +109,19 @@ class Relighter:
     """
 
     def __init__(self, inverse: InverseNet, shadow_net: ShadowNet, prior: LightingPrior, res: int = 64,
-                 renderer: torch.nn.Module | None = None) -> None:
+                 renderer: torch.nn.Module | None = None, sky_segmenter: torch.nn.Module | None = None,
+                 sky_generator: torch.nn.Module | None = None) -> None:
         self.inverse, self.shadow_net, self.prior, self.res = inverse.eval(), shadow_net.eval(), prior, res
         self.renderer = renderer.eval() if renderer is not None else None
+        self.sky_segmenter = sky_segmenter.eval() if sky_segmenter is not None else None
+        self.sky_generator = sky_generator.eval() if sky_generator is not None else None
 
     @classmethod
     def load(cls, path: str | os.PathLike | None = None) -> "Relighter":
         """Load ``inverse.safetensors``, ``shadow.safetensors``, ``lighting_prior.npz`` and, when
-        present, ``renderer.safetensors`` from ``path`` (a folder; None = the weights shipped
-        in the package)."""
+        present, ``renderer.safetensors``, ``sky_segmentation.safetensors`` and
+        ``sky_gan.safetensors`` from ``path`` (a folder; None = the weights shipped in the
+        package)."""
         d = Path(path) if path is not None else WEIGHTS_DIR
         if not d.is_dir():
             raise FileNotFoundError(f"no weights folder at {str(d)!r}")
@@ -129,12 +133,22 @@ class Relighter:
         inverse.load_state_dict(inv_t)
         shadow = ShadowNet(int(sh_m["width"]), int(sh_m["depth"]))
         shadow.load_state_dict(sh_t)
-        renderer = None
-        if (d / "renderer.safetensors").is_file():  # the neural renderer (second stage), when trained
+        # The second stage, each part when its weights are there.
+        renderer = segmenter = generator = None
+        if (d / "renderer.safetensors").is_file():
             from .neural_renderer import load_renderer
 
             renderer = load_renderer(d / "renderer.safetensors")
-        return cls(inverse, shadow, load_prior(d / "lighting_prior.npz"), int(inv_m.get("res", 64)), renderer)
+        if (d / "sky_segmentation.safetensors").is_file():
+            from .sky_segmentation import load_sky_segmenter
+
+            segmenter = load_sky_segmenter(d / "sky_segmentation.safetensors")
+        if (d / "sky_gan.safetensors").is_file():
+            from .sky_gan import load_sky_generator
+
+            generator = load_sky_generator(d / "sky_gan.safetensors")
+        return cls(inverse, shadow, load_prior(d / "lighting_prior.npz"), int(inv_m.get("res", 64)), renderer,
+                   segmenter, generator)
 
     @torch.no_grad()
     def decompose_linear(self, image: torch.Tensor, sky: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -142,13 +156,22 @@ class Relighter:
         ``albedo, normals, shadow, lighting (B, 9, 3), lighting_solved, foreground``."""
         return decompose_and_solve(self.inverse, image, sky, self.prior)
 
+    def sky_mask(self, image: torch.Tensor, sky_mask: Any = None) -> torch.Tensor:
+        """``(B, 1, H, W)`` bool sky mask of linear ``image (B, 3, H, W)``: the given mask, else the
+        sky segmenter's (when shipped), else all False (every pixel is foreground)."""
+        if sky_mask is None and self.sky_segmenter is not None:
+            from .sky_segmentation import segment_sky
+
+            return segment_sky(self.sky_segmenter, image)
+        return _as_mask(sky_mask, image)
+
     def decompose(self, image: Any, sky_mask: Any = None) -> dict[str, Any]:
         """Albedo ``(.., 3)``, normals ``(.., 3)`` (camera frame), shadow ``(.., 1)``, lighting
         ``(9, 3)`` (camera-frame radiance SH in the linearised photo's units) and the sky
-        mask ``(.., 1)`` (all False when none is given: every pixel is then used for the solve).
+        mask ``(.., 1)`` (:meth:`sky_mask`: the given one, else the segmenter's).
         """
         lin, kind = _as_image(image)
-        sky = _as_mask(sky_mask, lin)
+        sky = self.sky_mask(lin, sky_mask)
         out = self.decompose_linear(lin, sky)
         light = out["lighting"] if kind == "bchw" else out["lighting"][0]
         result = {k: _give_back(out[k], kind) for k in ("albedo", "normals", "shadow")}
@@ -251,18 +274,21 @@ class Relighter:
             "albedo", "normals", "shadow", "lighting", "foreground")}}
 
     def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
-                method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear") -> Any:
+                method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
+                seed: int = 0) -> Any:
         """Relight a photo of any size to a target lighting; the relit photo only.
 
         See :meth:`relight_layers` for the arguments; returns display values in [0, 1]
         (sRGB), type and layout of ``image``.
         """
         lin, kind = _as_image(image)
-        layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky)
+        layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky, new_sky,
+                                       seed)
         return _give_back(layers["relit"], kind)
 
     def relight_layers(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
-                       method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear") -> dict[str, np.ndarray]:
+                       method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
+                       seed: int = 0) -> dict[str, np.ndarray]:
         """Relight a photo of any size and give every layer at full resolution.
 
         The networks run at their training resolution (the short side resized to ``res``);
@@ -278,8 +304,11 @@ class Relighter:
             image: the photo (see the module doc); a single image.
             target: SH ``(9, 3)``, env map ``(H, 2H, 3)``, EXR path or sun direction ``(3,)``, world frame.
             world_to_camera: ``(4, 4)`` or ``(3, 3)``; None = level camera (camera = world frame).
-            sky_mask: optional ``(H, W)`` bool, True on sky (kept from the photo).
+            sky_mask: optional ``(H, W)`` bool, True on sky; None = the sky segmenter's mask
+                (when shipped; else no sky).
             method: see :meth:`relight_linear`.
+            new_sky: paint a sky for the target with SkyGAN (when shipped); False keeps the photo's.
+            seed: SkyGAN's noise (same seed, same sky).
             azimuth_deg: turn the target about the world's vertical axis first (degrees,
                 counter-clockwise seen from above).
             sky: sky type of a sun-direction target (:func:`sun_lighting`).
@@ -292,12 +321,14 @@ class Relighter:
         lin, _ = _as_image(image)
         if lin.shape[0] != 1:
             raise ValueError(f"relight_layers takes one image, got a batch of {lin.shape[0]}")
-        layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky)
+        layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky, new_sky,
+                                       seed)
         return {k: v[0].permute(1, 2, 0).numpy() for k, v in layers.items()}
 
     def _relight_tensors(self, lin: torch.Tensor, target: Any, world_to_camera: Any, sky_mask: Any, method: str,
-                         azimuth_deg: float, sky_type: str) -> dict[str, torch.Tensor]:
-        sky = _as_mask(sky_mask, lin)
+                         azimuth_deg: float, sky_type: str, new_sky: bool = True,
+                         seed: int = 0) -> dict[str, torch.Tensor]:
+        sky = self.sky_mask(lin, sky_mask)
         if not math.isfinite(float(azimuth_deg)):
             raise ValueError(f"azimuth must be a finite number of degrees, got {azimuth_deg!r}")
         target_cam = self.target_lighting(rotate_azimuth(target, azimuth_deg) if azimuth_deg else target,
@@ -309,6 +340,14 @@ class Relighter:
 
         def up(x: torch.Tensor) -> torch.Tensor:
             return torch.nn.functional.interpolate(x, size=size, mode="bilinear", align_corners=False)
+
+        if new_sky and self.sky_generator is not None and bool(sky.any()):
+            # SkyGAN at the working resolution (its training scale), conditioned on the relit
+            # foreground and the target; the sky is smooth, so upsampling it loses nothing.
+            from .sky_gan import generate_sky
+
+            painted = generate_sky(self.sky_generator, out["relit"], small_sky, out["target"], seed=seed)
+            relit = torch.where(sky, up(painted), relit)
 
         shading = image_model.shading(out["normals"], out["target"])
         with torch.no_grad():
