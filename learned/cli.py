@@ -9,6 +9,11 @@ Sub-subcommands (heavy imports stay inside the handlers):
   (or exported) weights next to the trivial baselines, as JSON;
 * ``train export --inverse RUN --shadow RUN --dest DIR``: weights-only safetensors for
   :meth:`learned.Relighter.load`.
+* ``train sky --data DIR --out RUN [--export PATH] [--evaluate DIR --json PATH]``: SkyGAN
+  (:mod:`learned.train_sky`; reads ground-truth SH, not self-supervised), optionally exported
+  and measured ("does the sky follow the SH") on held-out data;
+* ``train segmentation --data DIR --out RUN [--export PATH] [--evaluate DIR --json PATH]``:
+  the sky segmenter, optionally exported and scored (IoU vs trivial baselines).
 
 Re-running ``train inverse``/``train shadow`` with the same ``--out`` resumes from the
 latest checkpoint. Under ``torchrun --nproc_per_node N`` the loops run distributed (gloo).
@@ -120,6 +125,175 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _train_sky_stage(args: argparse.Namespace) -> int:
+    """``train sky`` / ``train segmentation``: train (or resume), then optionally export and measure."""
+    from pathlib import Path
+
+    from .train_sky import SKY_LOSS_WEIGHTS, SkyTrainConfig, export_sky, train_sky
+
+    weights = dict(SKY_LOSS_WEIGHTS)
+    for item in args.loss_weight or []:
+        name, _, value = item.partition("=")
+        if name not in weights:
+            raise ValueError(f"unknown loss weight {name!r}; known: {sorted(weights)}")
+        weights[name] = float(value)
+    cfg = SkyTrainConfig(stage=args.stage, data=args.data, out=args.out, val_data=args.val_data,
+                         val_split=args.val_split, train_split=args.train_split, width=args.width, depth=args.depth,
+                         res=args.res, batch=args.batch, steps=args.steps, lr=args.lr, lr_d=args.lr_d, seed=args.seed,
+                         augment=not args.no_augment, val_every=args.val_every, val_images=args.val_images,
+                         ckpt_every=args.ckpt_every, log_every=args.log_every, threads=args.threads, weights=weights,
+                         progress=not args.quiet)
+    result = train_sky(cfg)
+    print(json.dumps(result, indent=1))
+    if args.export:
+        path = export_sky(args.out, args.export)
+        print(f"{args.stage}: -> {path} ({path.stat().st_size / 1e3:.0f} kB)")
+    if args.evaluate:
+        from . import checkpoint as ckpt
+        from .train_sky import build_sky_model, evaluate_segmentation, sky_follows_lighting
+
+        model = build_sky_model(cfg)
+        ckpt.load_checkpoint(ckpt.latest_checkpoint(args.out), model, restore_rng=False)
+        if args.stage == "sky":
+            panel = Path(args.json).with_suffix(".png") if args.json else None
+            metrics = sky_follows_lighting(model["g"], args.evaluate, split="all", res=cfg.res, panel=panel)
+        else:
+            metrics = evaluate_segmentation(model["seg"], args.evaluate, split="all", res=cfg.res,
+                                            fit_root=cfg.data, fit_split=cfg.train_split)
+        text = json.dumps(metrics, indent=1)
+        print(text)
+        if args.json:
+            Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+            Path(args.json).write_text(text + "\n")
+    return 0
+
+
+def _add_sky_stages(tsub: argparse._SubParsersAction) -> None:
+    """Register ``train sky`` (SkyGAN) and ``train segmentation`` (the sky segmenter)."""
+    for stage, help_, width, batch, lr in (
+            ("sky", "SkyGAN: SPADE sky generator + 2-scale PatchGAN (uses ground-truth SH)", 8, 8, 2e-4),
+            ("segmentation", "sky segmentation UNet with photometric augmentation", 8, 16, 1e-3)):
+        p = tsub.add_parser(stage, help=help_)
+        p.add_argument("--data", required=True, help="synth dataset folder (trains on its 'train' split)")
+        p.add_argument("--out", required=True, help="run folder (re-run to resume)")
+        p.add_argument("--val-data", default=None, help="dataset for validation (default: --data)")
+        p.add_argument("--val-split", default="val", help="split validated on (default: val)")
+        p.add_argument("--train-split", default="train", help="split trained on (default: train)")
+        p.add_argument("--width", type=positive_int, default=width, help=f"network width (default: {width})")
+        p.add_argument("--depth", type=positive_int, default=3, help="UNet levels of the segmenter (default: 3)")
+        p.add_argument("--res", type=positive_int, default=64, help="training resolution (default: 64)")
+        p.add_argument("--batch", type=positive_int, default=batch, help=f"photos per step (default: {batch})")
+        p.add_argument("--steps", type=positive_int, default=2000)
+        p.add_argument("--lr", type=float, default=lr, help=f"learning rate (generator for sky; default: {lr})")
+        p.add_argument("--lr-d", type=float, default=2e-4, help="discriminator learning rate (sky; default: 2e-4)")
+        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--no-augment", action="store_true", help="segmentation: no photometric augmentation")
+        p.add_argument("--val-every", type=positive_int, default=250)
+        p.add_argument("--val-images", type=positive_int, default=96, help="validation photos")
+        p.add_argument("--ckpt-every", type=positive_int, default=250)
+        p.add_argument("--log-every", type=positive_int, default=10)
+        p.add_argument("--threads", type=positive_int, default=1, help="torch CPU threads (default: 1)")
+        p.add_argument("--loss-weight", action="append", metavar="NAME=VALUE",
+                       help="sky: override a loss weight (gan, fm, lowres)")
+        p.add_argument("--export", default=None, metavar="PATH", help="after training, export weights-only safetensors")
+        p.add_argument("--evaluate", default=None, metavar="DATA",
+                       help="after training, held-out figures on DATA (all splits): sky IoU vs baselines, or "
+                            "whether SkyGAN's sky follows the SH")
+        p.add_argument("--json", default=None, help="write the --evaluate figures here (sky: and a PNG panel "
+                                                      "beside it)")
+        p.add_argument("--quiet", action="store_true", help="no progress bar")
+        p.set_defaults(handler=_train_sky_stage)
+
+
+def _train_renderer(args: argparse.Namespace) -> int:
+    """``train renderer``: train (or resume) the neural renderer on frozen inverse network + ShadowNet."""
+    from .renderer_objectives import RendererWeights
+    from .train_renderer import RendererConfig, train_renderer
+
+    weights = RendererWeights().as_dict()
+    for item in args.loss_weight or []:
+        name, _, value = item.partition("=")
+        if name not in weights:
+            raise ValueError(f"unknown loss weight {name!r}; known: {sorted(weights)}")
+        weights[name] = float(value)
+    cfg = RendererConfig(data=args.data, out=args.out, inverse=args.inverse, shadow=args.shadow, prior=args.prior,
+                         val_data=args.val_data, val_split=args.val_split, train_split=args.train_split,
+                         width=args.width, depth=args.depth, d_width=args.d_width, res=args.res, batch=args.batch,
+                         steps=args.steps, phase1_steps=args.phase1_steps, cross_scale=args.cross_scale, lr=args.lr,
+                         lr_d=args.lr_d, seed=args.seed, val_every=args.val_every, val_images=args.val_images,
+                         ckpt_every=args.ckpt_every, log_every=args.log_every, threads=args.threads, weights=weights,
+                         progress=not args.quiet)
+    print(json.dumps(train_renderer(cfg), indent=1))
+    return 0
+
+
+def _export_renderer(args: argparse.Namespace) -> int:
+    from . import checkpoint as ckpt
+    from .train_renderer import export_renderer
+
+    side = ckpt.latest_checkpoint(args.run)
+    if side is None:
+        raise ValueError(f"no checkpoint in {args.run!r}")
+    path = export_renderer(side, args.dest)
+    print(f"renderer: {side} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
+    return 0
+
+
+def _evaluate_relight(args: argparse.Namespace) -> int:
+    import torch
+
+    from .relight_eval import Pipeline, evaluate_relight, format_table
+
+    torch.set_num_threads(args.threads)
+    pipe = Pipeline.load(args.weights, args.renderer)
+    if pipe.renderer is None:
+        print("note: no renderer weights found; 'proposed' falls back to shadownet_lambertian")
+    result = evaluate_relight(pipe.relight_linear, args.data, args.split, args.res, args.max_cases,
+                              progress=not args.quiet)
+    print(format_table(result))
+    if args.json:
+        from pathlib import Path
+
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
+    return 0
+
+
+def _add_renderer_stages(tsub: argparse._SubParsersAction) -> None:
+    """Register ``train renderer``, ``train export-renderer`` and ``train evaluate-relight``."""
+    rn = tsub.add_parser("renderer", help="neural renderer on the frozen inverse network + ShadowNet (two phases)")
+    _common(rn)
+    rn.set_defaults(width=12, lr=5e-4, steps=3000, threads=1, val_every=500, ckpt_every=250)
+    rn.add_argument("--inverse", default=None, help="inverse run folder or weights (default: the shipped ones)")
+    rn.add_argument("--shadow", default=None, help="ShadowNet run folder or weights (default: the shipped ones)")
+    rn.add_argument("--phase1-steps", type=int, default=2000,
+                    help="steps of phase 1 (self-reconstruction + cross-projection); later steps add cycle "
+                         "consistency and the GAN (default: 2000)")
+    rn.add_argument("--cross-scale", type=positive_int, default=4,
+                    help="cross-projection compared at 1/N resolution (default: 4)")
+    rn.add_argument("--d-width", type=positive_int, default=16, help="discriminator width (default: 16)")
+    rn.add_argument("--lr-d", type=float, default=2e-4, help="discriminator learning rate (default: 2e-4)")
+    rn.set_defaults(handler=_train_renderer)
+
+    ex = tsub.add_parser("export-renderer", help="write the renderer's weights-only safetensors")
+    ex.add_argument("--run", required=True, help="renderer run folder")
+    ex.add_argument("--dest", default="learned/weights/renderer.safetensors",
+                    help="destination file (default: learned/weights/renderer.safetensors)")
+    ex.set_defaults(handler=_export_renderer)
+
+    ev = tsub.add_parser("evaluate-relight", help="held-out relighting vs path tracing: proposed vs baselines")
+    ev.add_argument("--data", required=True, help="synth dataset folder with ground truth")
+    ev.add_argument("--split", default="all", help="split to evaluate (default: all)")
+    ev.add_argument("--weights", default=None, help="weights folder (default: the shipped ones)")
+    ev.add_argument("--renderer", default=None, help="renderer weights (default: <weights>/renderer.safetensors)")
+    ev.add_argument("--res", type=positive_int, default=64, help="resolution the pipeline runs at (default: 64)")
+    ev.add_argument("--max-cases", type=positive_int, default=None, help="at most this many (source, target) cases")
+    ev.add_argument("--threads", type=positive_int, default=1)
+    ev.add_argument("--json", default=None, help="also write the metrics here")
+    ev.add_argument("--quiet", action="store_true", help="no progress bar")
+    ev.set_defaults(handler=_evaluate_relight)
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``train`` with ``inverse``, ``shadow``, ``evaluate`` and ``export``."""
     p = sub.add_parser("train", help="train the inverse rendering network and ShadowNet (self-supervised)",
@@ -149,3 +323,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ex.add_argument("--shadow", required=True, help="shadow run folder")
     ex.add_argument("--dest", default="learned/weights", help="destination folder (default: learned/weights)")
     ex.set_defaults(handler=_export)
+
+    _add_sky_stages(tsub)
+    _add_renderer_stages(tsub)

@@ -1,0 +1,617 @@
+"""Training, export and held-out measurement of SkyGAN and the sky segmenter.
+
+``physrelight train sky --data DIR --out RUN`` and ``physrelight train segmentation --data
+DIR --out RUN`` (see :mod:`learned.cli`). Both loops are, like :mod:`learned.train`:
+
+* **seeded**: the networks are initialised from ``torch.manual_seed(seed)``; the photos,
+  flips, augmentation and noise of step ``t`` are a pure function of ``(seed, t)``;
+* **resumable to the same numbers**: a checkpoint (model, Adam state(s), RNG state)
+  every ``ckpt_every`` steps; re-running the same command continues from the latest one
+  and ends bit-identical to an uninterrupted run (``tests/learned/test_sky.py``);
+* **logged**: ``train.csv``, ``val.csv`` (validation split), TensorBoard, PNG panels.
+
+SkyGAN is *not* part of the self-supervised claim: it reads the photos' ground-truth SH
+(``SynthDataset(mode="full")``, brought into the photo's units as ``sh * 2**ev *
+wb_gains``, like :func:`learned.evaluate.load_ground_truth`). The segmenter uses the photo
+and its sky mask only.
+
+SkyGAN losses (generator ``G``, 2-scale PatchGAN ``D`` on the log composite, the mask and
+the tiled SH): LSGAN, discriminator feature matching (weight ``fm``; stands in for the
+paper's VGG perceptual loss: no pretrained VGG here) and an L1 between the 1/8-resolution
+masked means of the generated and the real log sky (weight ``lowres``: it anchors the
+sky's overall brightness, colour and gradient; the GAN terms supply the texture).
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from physrelight import io
+from synth.dataset import SynthDataset, to_chw
+
+from . import checkpoint as ckpt
+from .data import load_photo
+from .discriminators import MultiscaleDiscriminator, feature_matching_loss, lsgan_loss
+from .networks import count_parameters
+from .sky_gan import LOG_EPS, SkyGenerator, condition_map, generate_sky, lighting_scale
+from .sky_segmentation import SkySegmenter, photometric_augment, segment_sky
+from .train import _Logs, _ldr
+
+__all__ = ["SkyTrainConfig", "SkyData", "evaluate_segmentation", "export_sky", "mirror_lighting",
+           "sky_follows_lighting", "train_sky", "SKY_STAGES"]
+
+SKY_STAGES = ("sky", "segmentation")
+SKY_LOSS_WEIGHTS = {"gan": 1.0, "fm": 10.0, "lowres": 2.0}
+# SH coefficients odd in camera x (Y11 ~ x, Y2-2 ~ xy, Y21 ~ xz): a horizontal flip negates them.
+_ODD_IN_X = [3, 4, 7]
+
+
+@dataclass
+class SkyTrainConfig:
+    """Everything that determines a SkyGAN or segmentation run (recorded in every checkpoint)."""
+
+    stage: str
+    data: str
+    out: str
+    val_data: str | None = None
+    val_split: str = "val"
+    train_split: str = "train"
+    width: int = 8
+    depth: int = 3
+    res: int = 64
+    batch: int = 8
+    steps: int = 2000
+    lr: float = 2e-4
+    lr_d: float = 2e-4
+    seed: int = 0
+    z_dim: int = 16
+    noise_channels: int = 4
+    hidden: int = 16
+    d_width: int = 16
+    augment: bool = True
+    val_every: int = 250
+    val_images: int = 96
+    ckpt_every: int = 250
+    log_every: int = 10
+    threads: int = 1
+    weights: dict[str, float] = field(default_factory=lambda: dict(SKY_LOSS_WEIGHTS))
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if self.stage not in SKY_STAGES:
+            raise ValueError(f"stage must be one of {SKY_STAGES}, got {self.stage!r}")
+        for name in ("width", "depth", "res", "batch", "steps", "z_dim", "noise_channels", "hidden", "d_width",
+                     "val_every", "val_images", "ckpt_every", "log_every", "threads"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if self.res < 8:
+            raise ValueError(f"res must be >= 8, got {self.res}")
+        for name in ("lr", "lr_d"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if not Path(self.data, "manifest.json").is_file():
+            raise ValueError(f"{self.data!r} is not a dataset folder (no manifest.json)")
+        unknown = set(self.weights) - set(SKY_LOSS_WEIGHTS)
+        if unknown:
+            raise ValueError(f"unknown loss weights {sorted(unknown)}; known: {sorted(SKY_LOSS_WEIGHTS)}")
+        self.weights = {**SKY_LOSS_WEIGHTS, **self.weights}
+
+    def identity(self) -> dict[str, Any]:
+        """The fields that must agree for a resume."""
+        skip = {"out", "progress", "steps", "val_every", "val_images", "threads", "val_data", "val_split"}
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
+
+
+# ------------------------------------------------------------------------- data
+
+
+def mirror_lighting(lighting: torch.Tensor) -> torch.Tensor:
+    """Camera-frame SH ``(..., 9, 3)`` of the horizontally mirrored view (x -> -x)."""
+    out = lighting.clone()
+    out[..., _ODD_IN_X, :] = -out[..., _ODD_IN_X, :]
+    return out
+
+
+def _gain(params: dict) -> np.ndarray:
+    """``2**ev * wb_gains``: radiance / SH -> the photo's linear units."""
+    return 2.0 ** params["ev"] * np.asarray(params["wb_gains"], dtype=np.float64)
+
+
+class SkyData:
+    """All photos of a split in memory: linearised image, sky mask, GT SH in photo units.
+
+    Args:
+        root: dataset folder.
+        split: scene split.
+        res: resolution.
+        lighting: also read the ground-truth SH (``mode="full"``; SkyGAN only).
+        max_images: keep at most this many photos, evenly spread (None: all).
+        progress: a progress bar while loading.
+
+    Attributes:
+        image ``(N, 3, res, res)``, sky ``(N, 1, res, res)`` bool, lighting ``(N, 9, 3)``
+        float32 (zeros without ``lighting``), items ``[(scene, view, light)]``.
+    """
+
+    def __init__(self, root: str | Path, split: str, res: int, lighting: bool, max_images: int | None = None,
+                 progress: bool = False) -> None:
+        ds = SynthDataset(root, split=split, mode="full" if lighting else "self_supervised")
+        items = ds.items
+        if not items:
+            raise ValueError(f"{str(root)!r} has no photos in split {split!r}")
+        if max_images is not None and len(items) > max_images:
+            items = [items[i] for i in np.linspace(0, len(items) - 1, max_images).round().astype(int)]
+        from tqdm import tqdm
+
+        images, skies, lights = [], [], []
+        for it in tqdm(items, desc=f"load {Path(root).name}/{split}", disable=not progress, dynamic_ncols=True):
+            p = load_photo(ds, it.scene, it.view, it.light, res)
+            images.append(p["image"])
+            skies.append(p["sky"])
+            if lighting:
+                gt = ds.load(it.scene, it.view, it.light, keys=("sh", "photo_params"))
+                lights.append(torch.from_numpy(gt["sh"]["2"] * _gain(gt["photo_params"])[None, :]).float())
+            else:
+                lights.append(torch.zeros(9, 3))
+        self.image, self.sky, self.lighting = torch.stack(images), torch.stack(skies), torch.stack(lights)
+        self.items = [(it.scene, it.view, it.light) for it in items]
+        self.ds, self.res = ds, res
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def batch(self, size: int, seed: int, step: int, flip: bool = True) -> tuple[torch.Tensor, ...]:
+        """Photos of ``(seed, step)``: image, sky, lighting; half of them mirrored (SH mirrored too)."""
+        rng = np.random.default_rng([seed, step, 7])
+        idx = torch.from_numpy(rng.integers(len(self), size=size))
+        image, sky, light = self.image[idx].clone(), self.sky[idx].clone(), self.lighting[idx].clone()
+        if flip:
+            mirror = torch.from_numpy(rng.random(size) < 0.5)
+            image[mirror] = image[mirror].flip(-1)
+            sky[mirror] = sky[mirror].flip(-1)
+            light[mirror] = mirror_lighting(light[mirror])
+        return image, sky, light
+
+
+def _step_generator(seed: int, step: int, salt: int) -> torch.Generator:
+    return torch.Generator().manual_seed(int(np.random.default_rng([seed, step, salt]).integers(2**62)))
+
+
+# ------------------------------------------------------------------------- SkyGAN pieces
+
+
+def _disc_input(log_image: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+    """D sees the log composite (3), the sky mask (1) and the tiled SH (27): a conditional GAN."""
+    return torch.cat([log_image, cond[:, :1], cond[:, 6:]], 1)
+
+
+def _lowres_mean(x: torch.Tensor, mask: torch.Tensor, factor: int = 8) -> tuple[torch.Tensor, torch.Tensor]:
+    """Masked means of ``x`` over ``factor x factor`` cells and the cells' mask coverage."""
+    m = mask.to(x.dtype)
+    cover = F.avg_pool2d(m, factor, ceil_mode=True)
+    mean = F.avg_pool2d(x * m, factor, ceil_mode=True) / cover.clamp_min(1e-6)
+    return mean, cover
+
+
+def sky_gan_losses(model: nn.ModuleDict, image: torch.Tensor, sky: torch.Tensor, lighting: torch.Tensor,
+                   z: torch.Tensor, noise: torch.Tensor, weights: dict[str, float]) -> dict[str, torch.Tensor]:
+    """Generator and discriminator losses of one batch.
+
+    Args:
+        model: ``{"g": SkyGenerator, "d": MultiscaleDiscriminator}``.
+        image: ``(B, 3, H, W)`` linear photos (the real sky inside ``sky``).
+        sky: ``(B, 1, H, W)`` bool.
+        lighting: ``(B, 9, 3)`` SH in the photos' units.
+        z, noise: the generator's noise (:func:`learned.sky_gan.sky_noise` shapes).
+        weights: ``gan``, ``fm``, ``lowres``.
+
+    Returns:
+        ``g`` (total generator loss), ``d`` (discriminator loss on the detached fake) and the terms.
+    """
+    cond = condition_map(image, sky, lighting)
+    s = lighting_scale(lighting)
+    log_fake = model["g"](cond, z, noise)
+    real_log = torch.log(image.clamp_min(0) / s + LOG_EPS)
+    fake_log = torch.where(sky, torch.log(torch.exp(log_fake) + LOG_EPS), real_log)
+    real_in, fake_in = _disc_input(real_log, cond), _disc_input(fake_log, cond)
+    d_real, d_fake_det = model["d"](real_in), model["d"](fake_in.detach())
+    d_loss = 0.5 * (lsgan_loss(d_real, True) + lsgan_loss(d_fake_det, False))
+    d_fake = model["d"](fake_in)
+    gan = lsgan_loss(d_fake, True)
+    fm = feature_matching_loss(d_fake, d_real)
+    mf, cover = _lowres_mean(fake_log, sky)
+    mr, _ = _lowres_mean(real_log, sky)
+    lowres = ((mf - mr).abs() * cover).sum() / (cover.sum() * 3).clamp_min(1e-6)
+    g_loss = weights["gan"] * gan + weights["fm"] * fm + weights["lowres"] * lowres
+    return {"g": g_loss, "d": d_loss, "g_gan": gan, "g_fm": fm, "g_lowres": lowres}
+
+
+def build_sky_model(config: SkyTrainConfig) -> nn.ModuleDict:
+    torch.manual_seed(config.seed)
+    if config.stage == "sky":
+        g = SkyGenerator(config.width, config.z_dim, config.noise_channels, config.hidden)
+        d = MultiscaleDiscriminator(31, config.d_width, 3, scales=2)
+        return nn.ModuleDict({"g": g, "d": d})
+    return nn.ModuleDict({"seg": SkySegmenter(config.width, config.depth, config.res)})
+
+
+def _noise(model: nn.ModuleDict, b: int, h: int, w: int, gen: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    g = model["g"]
+    return (torch.randn(b, g.z_dim, generator=gen),
+            torch.randn(b, g.noise_channels, math.ceil(h / 8), math.ceil(w / 8), generator=gen))
+
+
+# ------------------------------------------------------------------------- the loop
+
+
+def train_sky(config: SkyTrainConfig) -> dict[str, Any]:
+    """Run (or resume) a SkyGAN or segmentation run; return the last validation metrics and timings."""
+    torch.set_num_threads(config.threads)
+    run = Path(config.out)
+    (run / "panels").mkdir(parents=True, exist_ok=True)
+    model = build_sky_model(config)
+    if config.stage == "sky":
+        opt: dict[str, torch.optim.Optimizer] = {
+            "g": torch.optim.Adam(model["g"].parameters(), lr=config.lr, betas=(0.5, 0.999)),
+            "d": torch.optim.Adam(model["d"].parameters(), lr=config.lr_d, betas=(0.5, 0.999))}
+    else:
+        opt = {"seg": torch.optim.Adam(model.parameters(), lr=config.lr)}
+
+    start, seconds = 0, 0.0
+    side = ckpt.latest_checkpoint(run)
+    if side is not None:
+        meta = ckpt.load_checkpoint(side, model, opt)
+        if SkyTrainConfig(**{**meta["config"], "out": config.out}).identity() != config.identity():
+            raise ValueError(f"{str(run)!r} holds a run with another configuration; use another --out")
+        start, seconds = int(meta["step"]), float(meta.get("train_seconds", 0.0))
+    if start >= config.steps:
+        print(f"{run}: already at step {start} >= {config.steps}")
+        return {"step": start, "train_seconds": seconds}
+
+    lighting = config.stage == "sky"
+    data = SkyData(config.data, config.train_split, config.res, lighting, progress=config.progress)
+    val = SkyData(config.val_data or config.data, config.val_split, config.res, lighting,
+                  max_images=config.val_images)
+    logs = _Logs(run, start, True)
+    if start == 0:
+        io.write_json(run / "config.json", {**asdict(config), "parameters": {k: count_parameters(m) for k, m in
+                                                                             model.items()}, "photos": len(data)})
+    from tqdm import tqdm
+
+    bar = tqdm(total=config.steps, initial=start, disable=not config.progress, dynamic_ncols=True,
+               desc=f"train {config.stage}")
+    metrics: dict[str, float] = {}
+    model.train()
+    for step in range(start, config.steps):
+        t0 = time.perf_counter()
+        image, sky, light = data.batch(config.batch, config.seed, step)
+        if config.stage == "sky":
+            z, noise = _noise(model, *image.shape[:1], *image.shape[-2:], _step_generator(config.seed, step, 1))
+            losses = sky_gan_losses(model, image, sky, light, z, noise, config.weights)
+            # D first on the detached fake, then G (D's graph for G's loss uses D's weights
+            # before this step: both gradients are taken before either optimizer steps).
+            opt["d"].zero_grad(set_to_none=True)
+            opt["g"].zero_grad(set_to_none=True)
+            d_grads = torch.autograd.grad(losses["d"], list(model["d"].parameters()))
+            losses["g"].backward(inputs=list(model["g"].parameters()))
+            for p, gr in zip(model["d"].parameters(), d_grads):
+                p.grad = gr
+            opt["d"].step()
+            opt["g"].step()
+            terms = {k: float(v.detach()) for k, v in losses.items()}
+            shown = terms["g"]
+        else:
+            if config.augment:
+                image = photometric_augment(image, _step_generator(config.seed, step, 2))
+            logits = model["seg"](image)
+            loss = F.binary_cross_entropy_with_logits(logits, sky.float())
+            opt["seg"].zero_grad(set_to_none=True)
+            loss.backward()
+            opt["seg"].step()
+            terms = {"bce": float(loss.detach())}
+            shown = terms["bce"]
+        seconds += time.perf_counter() - t0
+        done = step + 1
+        bar.update(1)
+        bar.set_postfix(loss=f"{shown:.4g}")
+        if done % config.log_every == 0 or done == config.steps:
+            logs.write("train.csv", done, {**terms, "seconds": seconds})
+        if done % config.ckpt_every == 0 or done == config.steps:
+            ckpt.save_checkpoint(run, done, model, opt, {"config": asdict(config), "train_seconds": seconds})
+        if done % config.val_every == 0 or done == config.steps:
+            model.eval()
+            metrics = _validate(model, config, val, run / "panels" / f"step_{done:07d}.png")
+            logs.write("val.csv", done, metrics)
+            model.train()
+    bar.close()
+    logs.close()
+    summary = {"step": config.steps, "train_seconds": seconds, "val": metrics,
+               "parameters": {k: count_parameters(m) for k, m in model.items()}}
+    io.write_json(run / "summary.json", summary)
+    return summary
+
+
+def _validate(model: nn.ModuleDict, config: SkyTrainConfig, val: SkyData, panel: Path) -> dict[str, float]:
+    with torch.no_grad():
+        if config.stage == "segmentation":
+            pred = segment_sky(model["seg"], val.image)
+            iou = _iou(pred, val.sky)
+            _seg_panel(panel, val.image[:6], pred[:6], val.sky[:6])
+            return {"iou_mean": float(np.nanmean(iou)), "iou_pooled": _pooled_iou(pred, val.sky)}
+        g = model["g"]
+        shuffled = val.lighting.roll(1, 0)
+        out = {}
+        for name, light in (("", val.lighting), ("shuffled_", shuffled)):
+            gen = generate_sky(g, val.image, val.sky, light, seed=0)
+            s = lighting_scale(light)
+            a = torch.log(gen.clamp_min(0) / s + LOG_EPS)
+            b = torch.log(val.image.clamp_min(0) / s + LOG_EPS)
+            mf, cover = _lowres_mean(a, val.sky)
+            mr, _ = _lowres_mean(b, val.sky)
+            out[f"{name}lowres_l1"] = float(((mf - mr).abs() * cover).sum() / (cover.sum() * 3))
+            if not name:
+                rows = [val.image[:4], gen[:4], generate_sky(g, val.image[:4], val.sky[:4], val.lighting[:4], seed=1)]
+            else:
+                rows.append(gen[:4])
+        _gan_panel(panel, rows)
+        return out
+
+
+def _iou(pred: torch.Tensor, gt: torch.Tensor) -> np.ndarray:
+    """Per-image IoU of ``(B, 1, H, W)`` bool masks (NaN where both are empty)."""
+    inter = (pred & gt).flatten(1).sum(1).double()
+    union = (pred | gt).flatten(1).sum(1).double()
+    return torch.where(union > 0, inter / union.clamp_min(1), torch.full_like(union, float("nan"))).numpy()
+
+
+def _pooled_iou(pred: torch.Tensor, gt: torch.Tensor) -> float:
+    return float((pred & gt).sum()) / max(float((pred | gt).sum()), 1.0)
+
+
+def _seg_panel(path: Path, image: torch.Tensor, pred: torch.Tensor, gt: torch.Tensor) -> None:
+    """Rows: photo | predicted mask | ground-truth mask."""
+    rows = []
+    for j in range(image.shape[0]):
+        rows.append(np.concatenate([_ldr(image[j]), np.repeat(pred[j].permute(1, 2, 0).float().numpy(), 3, -1),
+                                    np.repeat(gt[j].permute(1, 2, 0).float().numpy(), 3, -1)], 1))
+    io.write_png(path, np.concatenate(rows, 0))
+
+
+def _gan_panel(path: Path, columns: list[torch.Tensor]) -> None:
+    """Rows: photo | SkyGAN seed 0 | seed 1 | shuffled SH (all exposed as the photo)."""
+    rows = [np.concatenate([_ldr(c[j]) for c in columns], 1) for j in range(columns[0].shape[0])]
+    io.write_png(path, np.concatenate(rows, 0))
+
+
+# ------------------------------------------------------------------------- export
+
+
+def export_sky(run: str | Path, dest: str | Path) -> Path:
+    """Export the latest checkpoint of a ``sky`` or ``segmentation`` run to ``dest`` (weights only).
+
+    For SkyGAN only the generator is written (``g.*`` tensors, kind ``"sky_gan"``): the
+    discriminator is needed for training only. The segmenter is kind ``"sky_segmentation"``.
+    """
+    import json
+
+    side = ckpt.latest_checkpoint(run)
+    if side is None:
+        raise ValueError(f"no checkpoint in {str(run)!r}")
+    meta = json.loads(side.read_text())
+    cfg = meta["config"]
+    if cfg.get("stage") == "segmentation":
+        return ckpt.export_weights(side, dest, "sky_segmentation")
+    if cfg.get("stage") != "sky":
+        raise ValueError(f"{str(run)!r} is not a sky or segmentation run")
+    model = build_sky_model(SkyTrainConfig(**cfg))
+    ckpt.load_checkpoint(side, model, restore_rng=False)
+    gen_only = nn.ModuleDict({"g": model["g"]})
+    with tempfile.TemporaryDirectory() as tmp:
+        # A generator-only checkpoint, exported through the checkpoint module's own API.
+        opt = torch.optim.Adam(gen_only.parameters())
+        tmp_side = ckpt.save_checkpoint(tmp, int(meta["step"]), gen_only, opt,
+                                        {"config": cfg, "train_seconds": meta.get("train_seconds", 0.0)})
+        return ckpt.export_weights(tmp_side, dest, "sky_gan")
+
+
+# ------------------------------------------------------------------------- held-out measurements
+
+
+def _sky_stats(image: torch.Tensor, sky: torch.Tensor) -> np.ndarray:
+    """Per image ``(N, 4)``: log mean sky luminance, log(mean B / mean R), and the slopes of
+    log luminance along y (up) and x (right), image coordinates in [-1, 1] (least squares over
+    sky pixels; NaN when the sky spans fewer than 2 rows/columns)."""
+    out = []
+    luma = image.new_tensor((0.2126, 0.7152, 0.0722)).reshape(3, 1, 1)
+    for x, m in zip(image.double(), sky):
+        m = m[0]
+        h, w = m.shape
+        px = x[:, m].clamp_min(1e-6)
+        mean = px.mean(1)
+        lum = torch.log((x.clamp_min(1e-6) * luma.double()).sum(0)[m])
+        ys, xs = torch.meshgrid(torch.linspace(1, -1, h, dtype=torch.float64),
+                                torch.linspace(-1, 1, w, dtype=torch.float64), indexing="ij")
+        slopes = []
+        for c in (ys[m], xs[m]):
+            c = c - c.mean()
+            var = float((c * c).sum())
+            slopes.append(float((c * (lum - lum.mean())).sum()) / var if var > 1e-9 and len(torch.unique(c)) > 1
+                          else math.nan)
+        lmean = float((mean * luma[:, 0, 0].double()).sum())
+        out.append([math.log(lmean), math.log(float(mean[2]) / float(mean[0])), *slopes])
+    return np.asarray(out)
+
+
+_STAT_NAMES = ("log_brightness", "log_blue_over_red", "vertical_gradient", "horizontal_gradient")
+
+
+def _compare(pred: np.ndarray, gt: np.ndarray) -> dict[str, dict[str, float]]:
+    out = {}
+    for k, name in enumerate(_STAT_NAMES):
+        ok = np.isfinite(pred[:, k]) & np.isfinite(gt[:, k])
+        p, g = pred[ok, k], gt[ok, k]
+        r = float(np.corrcoef(p, g)[0, 1]) if ok.sum() > 2 and p.std() > 0 and g.std() > 0 else math.nan
+        out[name] = {"pearson_r": r, "mean_abs_err": float(np.abs(p - g).mean()), "n": int(ok.sum())}
+    return out
+
+
+def _sh_features(lighting: torch.Tensor) -> np.ndarray:
+    """``(N, 9, 3)`` -> ``(N, 4)`` SH-only predictors of the four sky statistics: log of the DC
+    mean radiance ``s``, log(L00 blue / L00 red), and the luminance of the y (Y1-1) and x (Y11)
+    terms over the DC's (light from above / from the right)."""
+    luma = lighting.new_tensor((0.2126, 0.7152, 0.0722))
+    lum = (lighting.double() * luma.double()).sum(-1)
+    l00 = lighting[:, 0].double().clamp_min(1e-12)
+    return torch.stack([torch.log(lighting_scale(lighting).flatten().double()), torch.log(l00[:, 2] / l00[:, 0]),
+                        lum[:, 1] / lum[:, 0], lum[:, 3] / lum[:, 0]], 1).numpy()
+
+
+def sky_follows_lighting(generator: SkyGenerator, root: str | Path, split: str = "all", res: int = 64,
+                         seed: int = 0, max_images: int | None = None, panel: str | Path | None = None) -> dict[str, Any]:
+    """Does the generated sky follow the SH it is given? Held-out figures (ground truth used for scoring only).
+
+    For every photo (scene, view, lighting a) and the next lighting b of the same view:
+
+    * ``same``: foreground = the linearised photo, SH = its own lighting a; reference = the
+      path-traced radiance of a in the photo's units (``radiance * 2**ev_a * wb_a``, clipped
+      at 1 like the photo's sensor).
+    * ``relight``: the relighting case: foreground = path-traced radiance of b in a's units (an
+      ideal relit foreground), SH = b's in a's units (the evaluation protocol); reference =
+      that radiance's sky. Baseline ``keep_source_sky``: the photo's own sky (a), what a
+      relighting without SkyGAN keeps.
+
+    Each with the true SH (``conditioned``), with the SH of another photo (``shuffled``, a
+    fixed derangement) and with that SH rescaled to the true DC luminance
+    (``shuffled_same_dc``: the sky's scale ``s`` is then right, only the SH's shape and
+    colour are wrong): if the SH drives the sky, conditioned beats both. Statistics
+    per image: log mean sky luminance, log(B/R), vertical and horizontal log-luminance
+    slopes; reported as Pearson r against the reference over images, and mean abs error.
+    ``sh_feature_baseline``: the statistic read straight off the SH (:func:`_sh_features`), no network.
+
+    ``panel``: also write a PNG, six photos with large skies, columns: photo | SkyGAN (own SH) |
+    SkyGAN (seed + 1) | SkyGAN (another photo's SH) | path-traced lighting b | SkyGAN (b's
+    foreground and SH), all in the photo's units through the sRGB curve, 2x nearest.
+    """
+    ds = SynthDataset(root, split=split, mode="full")
+    items = ds.items
+    if max_images is not None and len(items) > max_images:
+        items = [items[i] for i in np.linspace(0, len(items) - 1, max_images).round().astype(int)]
+    if len(items) < 3:
+        raise ValueError(f"need at least 3 photos in {str(root)!r} split {split!r}, got {len(items)}")
+    photos, skies, ref_a, ref_b, fg_b, light_a, light_b = [], [], [], [], [], [], []
+    for it in items:
+        p = load_photo(ds, it.scene, it.view, it.light, res)
+        lb = (it.light + 1) % ds.num_lights(it.scene)
+        gt_a = ds.load(it.scene, it.view, it.light, keys=("radiance", "sh", "photo_params"))
+        gt_b = ds.load(it.scene, it.view, lb, keys=("radiance", "sh"))
+        gain = _gain(gt_a["photo_params"])
+        rad = []
+        for g in (gt_a, gt_b):
+            r = to_chw(g["radiance"] * gain[None, None, :].astype(np.float32))
+            if r.shape[-1] != res:
+                r = F.interpolate(r[None], size=(res, res), mode="area")[0]
+            rad.append(r)
+        photos.append(p["image"])
+        skies.append(p["sky"])
+        ref_a.append(rad[0].clamp(0, 1))
+        ref_b.append(rad[1].clamp(0, 1))
+        fg_b.append(rad[1])
+        light_a.append(torch.from_numpy(gt_a["sh"]["2"] * gain[None, :]).float())
+        light_b.append(torch.from_numpy(gt_b["sh"]["2"] * gain[None, :]).float())
+    image, sky = torch.stack(photos), torch.stack(skies)
+    la, lb_, fgb = torch.stack(light_a), torch.stack(light_b), torch.stack(fg_b)
+    n = len(items)
+    perm = np.random.default_rng(seed).permutation(n)
+    derange = np.empty(n, dtype=int)
+    derange[perm] = perm[np.r_[1:n, 0]]  # every photo gets another photo's SH
+    generator = generator.eval()
+    results: dict[str, Any] = {"images": n, "res": res, "seed": seed, "statistics": list(_STAT_NAMES)}
+    for case, fg, light, ref in (("same", image, la, torch.stack(ref_a)), ("relight", fgb, lb_, torch.stack(ref_b))):
+        ref_stats = _sky_stats(ref, sky)
+        case_out: dict[str, Any] = {}
+        other = light[torch.from_numpy(derange)]
+        # The other photo's SH rescaled to this one's DC luminance: only its shape and colour differ,
+        # so the brightness normalisation (s) cannot explain a difference.
+        same_dc = other * (lighting_scale(light) / lighting_scale(other)).reshape(-1, 1, 1)
+        for name, l in (("conditioned", light), ("shuffled", other), ("shuffled_same_dc", same_dc)):
+            gen = generate_sky(generator, fg, sky, l, seed=seed)
+            case_out[name] = _compare(_sky_stats(gen, sky), ref_stats)
+        if case == "relight":
+            case_out["keep_source_sky"] = _compare(_sky_stats(image, sky), ref_stats)
+        # Reading the statistic straight off the SH (no network): Pearson r only, the scales differ.
+        case_out["sh_feature_baseline"] = {k: {"pearson_r": v["pearson_r"], "n": v["n"]} for k, v in
+                                           _compare(_sh_features(light), ref_stats).items()}
+        results[case] = case_out
+    if panel is not None:
+        frac = sky.float().mean((1, 2, 3))
+        pick = torch.argsort(frac, descending=True)[: max(6, n // 6)][:: max(1, max(6, n // 6) // 6)][:6]
+        other = la[torch.from_numpy(derange)]
+        cols = [image[pick], generate_sky(generator, image[pick], sky[pick], la[pick], seed=seed),
+                generate_sky(generator, image[pick], sky[pick], la[pick], seed=seed + 1),
+                generate_sky(generator, image[pick], sky[pick], other[pick], seed=seed),
+                torch.stack(ref_b)[pick], generate_sky(generator, fgb[pick], sky[pick], lb_[pick], seed=seed)]
+        rows = [np.concatenate([_ldr(c[j]) for c in cols], 1) for j in range(len(pick))]
+        grid = np.concatenate(rows, 0)
+        io.write_png(panel, np.clip(grid.repeat(2, 0).repeat(2, 1), 0, 1))
+    return results
+
+
+def _fit_baselines(data: SkyData) -> dict[str, float]:
+    """Fit the trivial baselines' single parameter on training photos (best mean IoU)."""
+    h = data.res
+    best_rows = max(range(0, h + 1), key=lambda k: np.nanmean(_iou(_top_rows(data.image, k), data.sky)))
+    feat = _brightness(data.image)
+    grid = np.linspace(0.05, 1.0, 39)
+    best_t = max(grid, key=lambda t: np.nanmean(_iou(feat > t, data.sky)))
+    return {"top_rows_fraction": best_rows / h, "brightness_threshold": float(best_t)}
+
+
+def _top_rows(image: torch.Tensor, k: int) -> torch.Tensor:
+    b, _, h, w = image.shape
+    m = torch.zeros(b, 1, h, w, dtype=torch.bool)
+    m[:, :, :k] = True
+    return m
+
+
+def _brightness(image: torch.Tensor) -> torch.Tensor:
+    """Luminance over the image's 99th percentile luminance ``(B, 1, H, W)``."""
+    lum = (image * image.new_tensor((0.2126, 0.7152, 0.0722)).reshape(1, 3, 1, 1)).sum(1, keepdim=True)
+    q = torch.quantile(lum.flatten(1), 0.99, dim=1).reshape(-1, 1, 1, 1).clamp_min(1e-6)
+    return lum / q
+
+
+def evaluate_segmentation(model: SkySegmenter, root: str | Path, split: str = "all", res: int = 64,
+                          fit_root: str | Path | None = None, fit_split: str = "train",
+                          fit_images: int = 300) -> dict[str, Any]:
+    """Held-out sky IoU of the segmenter and of two trivial baselines.
+
+    Baselines, each with one parameter fitted for the best mean IoU on ``fit_images``
+    photos of ``fit_root``/``fit_split`` (the training data): *top rows* (the top ``k``
+    rows are sky) and *brightness threshold* (luminance / the image's 99th percentile > t).
+    IoU per image (mean over images) and pooled over all pixels. The segmenter also runs
+    on photometrically augmented photos (seeded) to show its robustness.
+    """
+    data = SkyData(root, split, res, lighting=False)
+    fit = _fit_baselines(SkyData(fit_root or root, fit_split, res, lighting=False, max_images=fit_images))
+    model = model.eval()
+    aug = photometric_augment(data.image, torch.Generator().manual_seed(1234))
+    preds = {"network": segment_sky(model, data.image), "network_augmented_input": segment_sky(model, aug),
+             "baseline_top_rows": _top_rows(data.image, round(fit["top_rows_fraction"] * res)),
+             "baseline_brightness": _brightness(data.image) > fit["brightness_threshold"]}
+    out: dict[str, Any] = {"images": len(data), "res": res, "fitted": fit, "sky_fraction": float(data.sky.float().mean())}
+    for name, p in preds.items():
+        out[name] = {"iou_mean": float(np.nanmean(_iou(p, data.sky))), "iou_pooled": _pooled_iou(p, data.sky),
+                     "pixel_accuracy": float((p == data.sky).float().mean())}
+    return out
