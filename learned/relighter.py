@@ -222,7 +222,8 @@ class Relighter:
                 unknown scale, so the target is mapped into the decomposition's units by the
                 ratio of DC luminances: estimated source / ``source_lighting`` (None: estimated
                 source / ``target``, i.e. the photo keeps its exposure and only the lighting's
-                shape changes).
+                shape changes). An estimate without a positive DC term (no usable foreground)
+                takes the lighting prior's mean level instead.
             method: ``"proposed"`` (the neural renderer; ``"shadownet_lambertian"`` when no
                 renderer weights are loaded), ``"lambertian_sh"`` (``albedo * shading(n; target)``,
                 the InverseRenderNet-style baseline) or ``"shadownet_lambertian"`` (times
@@ -257,7 +258,12 @@ class Relighter:
         ref_dc = self._dc_luminance(ref)
         if bool((ref_dc <= 0).any()) or bool((self._dc_luminance(tgt) <= 0).any()):
             raise ValueError("target (or source) lighting has no positive DC term (a dark or invalid lighting)")
-        scale = (self._dc_luminance(out["lighting"]).clamp_min(0) / ref_dc)[:, None, None]
+        est_dc = self._dc_luminance(out["lighting"])
+        # A degenerate estimate (no usable foreground, e.g. a photo that is nearly all sky) has no
+        # level to match: fall back on the outdoor prior's mean level (photo units).
+        prior_dc = self._dc_luminance(self.prior.mean.reshape(1, 9, 3).to(est_dc.dtype))
+        est_dc = torch.where(est_dc > 1e-6 * prior_dc, est_dc, prior_dc)
+        scale = (est_dc / ref_dc)[:, None, None]
         tgt = tgt * scale
         if method == "lambertian_sh":
             s = torch.ones_like(out["shadow"])

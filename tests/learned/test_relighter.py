@@ -119,3 +119,15 @@ def test_06_relight_any_size_photo_and_bad_input(relighter) -> None:
         relighter.relight_linear(img, sky, -_target(6))
     with pytest.raises(ValueError, match="NaN"):
         relighter.relight_linear(img, sky, _target(6) * float("nan"))
+
+
+def test_07_a_photo_without_usable_foreground_falls_back_on_the_prior_level(relighter) -> None:
+    img = torch.full((1, 3, 16, 16), 0.5)
+    sky = torch.ones(1, 1, 16, 16, dtype=torch.bool)
+    sky[..., 8, 8] = False  # one black foreground pixel: no lighting can be solved from it
+    img[..., 8, 8] = 0.0
+    out = relighter.relight_linear(img, sky, _target(7), method="lambertian_sh")
+    lum = torch.tensor([0.2126, 0.7152, 0.0722])
+    prior_dc = (relighter.prior.mean.reshape(9, 3)[0].float() * lum).sum()
+    torch.testing.assert_close((out["target"][0, 0] * lum).sum(), prior_dc)
+    assert torch.isfinite(out["relit"]).all()
