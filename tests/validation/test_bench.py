@@ -1,0 +1,156 @@
+"""Specification of ``physrelight bench``: the quick run end to end (its own held-out set, every
+method, both protocols, the strata, the charts), its physics ordering, and the pieces it stands on
+(protocol units, the oracle identity, the sun path, the strata predicates)."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from physrelight.cli import main
+
+METHOD_NAMES = {"proposed", "lambertian_sh", "shadownet_lambertian", "oracle_sh", "oracle_sh_shadow", "identity",
+                "mitsuba_analysis_by_synthesis"}
+METRICS = ("l1", "mse", "ssim", "dssim", "psnr", "ciede2000")
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory) -> Path:
+    # One torch thread: on a shared 2-core machine two threads can be 10-30x slower.
+    out = tmp_path_factory.mktemp("bench") / "report"
+    assert main(["bench", "--quick", "-o", str(out), "--threads", "1", "--quiet"]) == 0
+    return out
+
+
+def _finite_numbers(obj) -> bool:
+    if isinstance(obj, dict):
+        return all(_finite_numbers(v) for v in obj.values())
+    if isinstance(obj, list):
+        return all(_finite_numbers(v) for v in obj)
+    if isinstance(obj, float):
+        return math.isfinite(obj)
+    return True
+
+
+def test_01_quick_run_scores_every_method_without_nan_and_the_physics_ordering_holds(quick: Path) -> None:
+    r = json.loads((quick / "bench.json").read_text())
+    assert set(r["methods"]) == METHOD_NAMES
+    for name, m in r["methods"].items():
+        for k in METRICS:
+            assert isinstance(m[k], float) and math.isfinite(m[k]), (name, k)
+        assert m["seconds_per_image"] > 0 and m["nonfinite"] == 0 and m["failures"] == 0, name
+    # NaN would have been written as null: every number in the report is finite.
+    assert _finite_numbers(r) and r["verdicts"]["finite"]["passed"]
+    m = r["methods"]
+    # Physics: the true target shadow brings the image model closer to the path tracer.
+    assert m["oracle_sh_shadow"]["l1"] < m["oracle_sh"]["l1"]
+    assert r["verdicts"]["physics_ordering"]["passed"]
+    # The ceiling is far ahead of doing nothing, and ground truth ahead of learned decompositions.
+    assert m["oracle_sh"]["l1"] < 0.6 * m["identity"]["l1"]
+    assert m["oracle_sh_shadow"]["l1"] < m["lambertian_sh"]["l1"]
+    # Metrics agree with each other: DSSIM is (1 - SSIM) / 2.
+    for x in m.values():
+        assert x["dssim"] == pytest.approx((1 - x["ssim"]) / 2, abs=1e-9)
+    # Analysis by synthesis ran on a small subset and is slow, as stated.
+    a = m["mitsuba_analysis_by_synthesis"]
+    assert a["photos"] == 2 and 2 <= a["pairs"] <= 6
+    assert a["seconds_per_image"] > 10 * m["proposed"]["seconds_per_image"]
+
+
+def test_02_protocols_strata_and_sweep_are_all_populated(quick: Path) -> None:
+    r = json.loads((quick / "bench.json").read_text())
+    assert r["protocols"]["cross"]["pairs"] >= 20 and r["protocols"]["timelapse"]["pairs"] >= 12
+    for name in ("proposed", "identity", "oracle_sh_shadow"):
+        assert set(r["methods"][name]["by_source_lighting"]) >= {"sunsky", "evening", "overcast"}
+        assert math.isfinite(r["methods"][name]["timelapse"]["l1"])
+    for key in ("dark_input", "low_sun", "overcast", "night_like", "noise_jpeg", "large_azimuth", "glossy",
+                "bright_albedo", "dark_albedo"):
+        s = r["strata"][key]
+        assert s["pairs"] >= 1, key
+        for name, x in s["methods"].items():
+            assert math.isfinite(x["l1"]) and x["l1_vs_all"] > 0, (key, name)
+    # The oracles never see the photo: darkening or degrading it cannot change them.
+    for key in ("dark_input", "noise_jpeg"):
+        assert r["strata"][key]["methods"]["oracle_sh"]["l1_vs_same_pairs"] == pytest.approx(1.0, abs=1e-6)
+    sweep = r["speed"]["sweep"]
+    assert sorted(s["res"] for s in sweep if s["kind"] == "resolution") == [32, 64, 128]
+    assert all(math.isfinite(s["l1"]) and s["seconds_per_image"] > 0 for s in sweep)
+    assert r["machine"]["torch_threads"] == 1 and r["command"].startswith("physrelight bench --quick")
+
+
+def test_03_bench_md_has_the_tables_verdicts_and_charts(quick: Path) -> None:
+    md = (quick / "bench.md").read_text()
+    for heading in ("## Verdicts", "## Cross-relighting (the paper's Table 2 layout)",
+                    "## Time-lapse (the paper's Table 1 layout)", "## Analysis by synthesis",
+                    "## Speed vs accuracy", "## Failure modes (strata)"):
+        assert heading in md
+    assert "**Physics ordering: PASS**" in md
+    assert re.search(r"\*\*Proposed vs baselines: (PASS|FAIL)\*\*", md)
+    links = re.findall(r"!\[[^\]]*\]\((charts/[^)]+\.png)\)", md)
+    assert len(links) == 3
+    for link in links:
+        assert (quick / link).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", link
+
+
+def test_04_oracle_with_true_shading_and_shadow_is_the_image_model_and_units_follow_the_photo() -> None:
+    from validation.bench import data, methods, protocols
+
+    h = w = 16
+    rng = np.random.default_rng(0)
+    normal = np.zeros((h, w, 3), np.float32)
+    normal[..., 2] = 1.0
+    sky = np.zeros((h, w), bool)
+    sky[:3] = True
+    normal[sky] = 0
+    albedo = rng.uniform(0.2, 0.6, (h, w, 3)).astype(np.float32)
+    sh = [np.zeros((9, 3)), np.zeros((9, 3))]
+    sh[0][0], sh[1][0] = 1.0, 2.0
+    sh[1][2] = 0.5  # light from the camera side (+z) brightens camera-facing surfaces
+    view = data.BenchView(
+        scene="toy", view=0, group="quick", albedo=albedo, normal=normal, sky=sky, glossy=np.zeros((h, w), np.float32),
+        lights=[data.light_info("overcast", None, s) for s in sh], sh=sh,
+        radiance=[np.zeros((h, w, 3), np.float32)] * 2, shadow=[np.ones((h, w), np.float32)] * 2,
+        direct_shadow=[np.full((h, w), 0.5, np.float32)] * 2, sun_sh=[np.zeros((9, 3))] * 2,
+        photo=[np.full((h, w, 3), 0.5, np.float32)] * 2, photo_params=[{"ev": 1.0, "wb_gains": [1.1, 1.0, 0.9]}] * 2)
+    pair = protocols.cross_pairs([view])[0]
+    assert (pair.source, pair.target) == (0, 1)
+    np.testing.assert_allclose(pair.gain, [2.2, 2.0, 1.8])
+    plain = methods.OracleSH(None)(pair)[0].permute(1, 2, 0).numpy()
+    from physrelight import sh as _sh
+
+    e = _sh.irradiance(sh[1], np.array([[0.0, 0.0, 1.0]]))[0] / np.pi  # shading of a camera-facing normal
+    np.testing.assert_allclose(plain[~sky], (albedo * e * pair.gain)[~sky], rtol=1e-5)
+    # Without a sun the true shadow is the direct-light ratio (0.5 here).
+    shadowed = methods.OracleSH("true")(pair)[0].permute(1, 2, 0).numpy()
+    np.testing.assert_allclose(shadowed[~sky], 0.5 * plain[~sky], rtol=1e-5)
+    # Sky pixels are the input's.
+    assert torch.equal(methods.Identity()(pair)[0][:, sky], pair.image()[0][:, sky])
+
+
+def test_05_sun_path_is_symmetric_about_noon_and_highest_there() -> None:
+    from validation.bench.data import sun_path
+
+    path = sun_path([8.0, 12.0, 16.0], latitude_deg=40.0, declination_deg=10.0)
+    (h0, e0, a0), (h1, e1, a1), (h2, e2, a2) = path
+    assert e1 == pytest.approx(90 - 40 + 10, abs=1e-9)  # noon elevation = 90 - latitude + declination
+    assert a1 == pytest.approx(180.0, abs=1e-6)  # due south at noon in the northern hemisphere
+    assert e0 == pytest.approx(e2) and e0 < e1
+    assert a0 < 180 < a2 and a0 + a2 == pytest.approx(360.0)  # morning east of south, evening west
+    assert [p[0] for p in sun_path([3.0, 12.0])] == [12.0]  # the sun is below the horizon at 3 am
+
+
+def test_06_bad_arguments_fail_with_one_line(tmp_path, capsys) -> None:
+    from physrelight.cli import main as cli
+
+    with pytest.raises(SystemExit):
+        cli(["bench", "--threads", "0", "-o", str(tmp_path)])
+    assert "positive integer" in capsys.readouterr().err
+    rc = cli(["bench", "--quick", "--data", str(tmp_path / "nowhere"), "-o", str(tmp_path / "o"), "--quiet"])
+    assert rc != 0
+    assert "no synth dataset" in capsys.readouterr().err

@@ -1,0 +1,228 @@
+"""The relighting methods of the benchmark, one uniform signature.
+
+A method is a callable ``method(pair) -> (1, 3, H, W)`` linear image in the source photo's
+linear units (:class:`validation.bench.protocols.Pair`), sky pixels equal to the input.
+What each one may use:
+
+``proposed``, ``lambertian_sh``, ``shadownet_lambertian``
+    the photo, its sky mask and the target and source lightings (camera-frame SH in the
+    photo's units, the protocol): :meth:`learned.Relighter.relight_linear`. The
+    decomposition's albedo/lighting scale is fixed by the ratio of the estimated to the
+    given source lighting (``source_lighting=``).
+``oracle_sh``, ``oracle_sh_shadow``
+    ground-truth albedo and normals with the target's SH shading (the image model
+    ``albedo * shading(n; L_target)``, :mod:`physrelight.image_model`), times the
+    ground-truth target shadow for the second: the relighting ceiling of
+    ``physrelight validate`` check 5 ("paper" stage), here in the source photo's units.
+``identity``
+    the input unchanged.
+``mitsuba_analysis_by_synthesis``
+    the photo plus the scene's geometry and camera (known from synth): albedo textures
+    and lighting (sky map + sun irradiance; the sun direction is given) fitted by
+    differentiable path tracing (:func:`synth.analysis_by_synthesis.fit`), then the
+    fitted textures path traced under the target lighting. Expensive: run on a subset.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+import torch
+
+from physrelight import image_model
+
+from .protocols import Pair
+
+LEARNED = ("proposed", "lambertian_sh", "shadownet_lambertian")
+ORACLES = ("oracle_sh", "oracle_sh_shadow")
+METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "oracle_sh", "oracle_sh_shadow", "identity")
+ABS_NAME = "mitsuba_analysis_by_synthesis"
+
+
+def _chw(x: np.ndarray) -> torch.Tensor:
+    """``(H, W, C)`` / ``(H, W)`` numpy -> ``(1, C, H, W)`` float32."""
+    t = torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))
+    return (t[None] if t.ndim == 2 else t.permute(2, 0, 1))[None]
+
+
+class Identity:
+    """The input unchanged (the photo, linearised; displayed again it is the photo)."""
+
+    name = "identity"
+
+    def __call__(self, pair: Pair) -> torch.Tensor:
+        return pair.image()
+
+
+class OracleSH:
+    """Ground-truth albedo and normals with the target SH shading, optionally with the true target shadow.
+
+    With ``shadow="true"`` (``oracle_sh_shadow``): under a lighting with a sun, the sun's
+    light is multiplied by its ground-truth visibility and the sky's is not,
+    ``albedo * (shading(n; L - L_sun) + v_sun * shading(n; L_sun))``, i.e. the image model's
+    ``s = (E_sky + v_sun E_sun) / E``; without a sun, ``s`` is the ground-truth direct-light
+    ratio (``direct_shadow.exr``: sky occlusion). ``"sun"`` and ``"direct"`` are diagnostics:
+    the sun's visibility, or the direct-light ratio, multiplying the whole shading.
+    """
+
+    SHADOWS = (None, "true", "sun", "direct")
+
+    def __init__(self, shadow: str | None, name: str | None = None) -> None:
+        if shadow not in self.SHADOWS:
+            raise ValueError(f"shadow must be one of {self.SHADOWS}, got {shadow!r}")
+        self.shadow = shadow
+        self.name = name or ("oracle_sh" if shadow is None else "oracle_sh_shadow" if shadow == "true"
+                             else f"oracle_sh_{shadow}_shadow")
+
+    def __call__(self, pair: Pair) -> torch.Tensor:
+        v, b = pair.view, pair.target
+        albedo, normals, L = _chw(v.albedo), _chw(v.normal), pair.target_lighting()
+        has_sun = bool(np.any(v.sun_sh[b]))
+        if self.shadow == "true" and has_sun:
+            L_sun = torch.from_numpy((v.sun_sh[b] * pair.gain[None, :]).astype(np.float32))[None]
+            shading = image_model.shading(normals, L - L_sun) + _chw(v.shadow[b]) * image_model.shading(normals, L_sun)
+            relit = albedo * shading
+        else:
+            s = {None: None, "sun": v.shadow[b], "direct": v.direct_shadow[b], "true": v.direct_shadow[b]}[self.shadow]
+            relit = image_model.render(albedo, normals, L, None if s is None else _chw(s))
+        return torch.where(pair.sky(), pair.image(), relit.clamp_min(0.0))
+
+
+class Learned:
+    """:meth:`learned.Relighter.relight_linear` with one of its methods.
+
+    Args:
+        relighter: a loaded :class:`learned.Relighter`.
+        method: ``"proposed"``, ``"lambertian_sh"`` or ``"shadownet_lambertian"``.
+        res: working resolution: the photo is resampled so its short side is ``res``
+            (:func:`learned.relighter.working_resolution`), relit there, and brought back by
+            ratio transfer (:func:`learned.relighter.transfer_to_full_resolution`); None = as given.
+        name: the name reported (default ``method``).
+    """
+
+    def __init__(self, relighter: Any, method: str, res: int | None = None, name: str | None = None) -> None:
+        if method not in LEARNED:
+            raise ValueError(f"method must be one of {LEARNED}, got {method!r}")
+        self.relighter, self.method, self.res = relighter, method, res
+        self.name = name or method
+
+    def __call__(self, pair: Pair) -> torch.Tensor:
+        from learned.relighter import transfer_to_full_resolution, working_resolution
+
+        image, sky = pair.image(), pair.sky()
+        small, small_sky = (image, sky) if self.res is None else working_resolution(image, sky, self.res)
+        out = self.relighter.relight_linear(small, small_sky, pair.target_lighting(),
+                                            source_lighting=pair.source_lighting(), method=self.method)
+        relit = transfer_to_full_resolution(image, small, out["relit"])
+        return torch.where(sky, image, relit)
+
+
+@dataclass
+class AnalysisBySynthesis:
+    """Differentiable path tracing: fit textures + lighting to the photo, re-render under the target.
+
+    The fit starts from grey textures (0.5) and the *given* source lighting (the same
+    knowledge the other methods get: its SH there, the full sky map and sun here),
+    brought into the photo's linear units; it optimises the textures, the sky map and the
+    sun's irradiance (not its direction: Mitsuba's ``prb`` cannot differentiate it). The
+    target lighting, in the photo's units, is scaled by the fitted over the given source
+    DC luminance (the albedo/lighting scale trade-off, as for the learned methods) and the
+    fitted textures are path traced under it (``max_depth`` 8).
+
+    Attributes:
+        steps, lr, fit_spp, fit_depth: the optimisation (Adam steps, learning rate, samples
+            per pixel and path length of each differentiable render).
+        render_spp: samples per pixel of the final render.
+        fit_seconds, render_seconds: measured per fitted photo / per relit pair.
+    """
+
+    steps: int = 30
+    lr: float = 0.05
+    fit_spp: int = 8
+    fit_depth: int = 3
+    render_spp: int = 32
+    seed: int = 0
+    name: str = ABS_NAME
+    fit_seconds: list[float] = field(default_factory=list)
+    render_seconds: list[float] = field(default_factory=list)
+    final_loss: list[float] = field(default_factory=list)
+    _fits: dict[tuple[str, int, str], Any] = field(default_factory=dict, repr=False)
+
+    @staticmethod
+    def _in_photo_units(light: Any, gain: np.ndarray, scale: float = 1.0) -> Any:
+        from synth.lighting import Lighting
+
+        g = np.asarray(gain, dtype=np.float64) * scale
+        return Lighting(kind=light.kind, params=dict(light.params),
+                        sky=(light.sky * g[None, None, :]).astype(np.float32),
+                        sun_direction=light.sun_direction, sun_irradiance=light.sun_irradiance * g,
+                        sun_radius_deg=light.sun_radius_deg)
+
+    def _fit(self, pair: Pair) -> tuple[Any, float]:
+        """The fit of the pair's source photo (cached) and its DC scale (fitted / given source)."""
+        key = (pair.view.name, pair.source, pair.variant)
+        if key in self._fits:
+            return self._fits[key]
+        from synth import analysis_by_synthesis as abs_
+        from synth.differentiable import DifferentiableRenderer
+        from synth.lighting import Lighting
+
+        if pair.view.physical is None:
+            raise ValueError(f"{pair.view.name} has no scene geometry: analysis by synthesis needs it")
+        spec, cam, lights = pair.view.physical()
+        given = self._in_photo_units(lights[pair.source], pair.gain)
+        t0 = time.perf_counter()
+        renderer = DifferentiableRenderer(spec, cam, given, spp=self.fit_spp, max_depth=self.fit_depth)
+        photo = pair.image()[0].permute(1, 2, 0).contiguous()
+        # The photo's sky is clipped LDR while the rendered sky is the HDR map itself: left in, the
+        # sky pixels dominate the loss (x100 on HDRIs) and the fit dims the sky instead of matching
+        # the scene. They are replaced by the given lighting's rendered sky, so only the foreground
+        # drives the fit (synth.analysis_by_synthesis.fit has no mask).
+        with torch.no_grad():
+            sky_render = renderer.render(None, seed=self.seed + 7, spp=4 * self.fit_spp)
+        sky = torch.from_numpy(np.ascontiguousarray(pair.view.sky))[..., None]
+        photo = torch.where(sky, sky_render, photo)
+        grey = {k: torch.full_like(v, 0.5) for k, v in renderer.parameters().items() if k.startswith("texture/")}
+        with torch.enable_grad():  # callers may run methods under no_grad; the fit needs gradients
+            fitted = abs_.fit(renderer, photo, steps=self.steps, lr=self.lr, init=grey, seed=self.seed)
+        self.fit_seconds.append(time.perf_counter() - t0)
+        self.final_loss.append(fitted.losses[-1])
+        sun = fitted.inputs["sun_irradiance"].double().numpy() if given.has_sun else np.zeros(3)
+        fitted_light = Lighting(kind=given.kind, params=dict(given.params),
+                                sky=fitted.inputs["sky"].numpy().astype(np.float32),
+                                sun_direction=given.sun_direction, sun_irradiance=np.clip(sun, 0, None),
+                                sun_radius_deg=given.sun_radius_deg)
+        lum = np.array([0.2126, 0.7152, 0.0722])
+        scale = float(fitted_light.sh(2)[0] @ lum) / max(float(given.sh(2)[0] @ lum), 1e-12)
+        self._fits[key] = (fitted, scale)
+        return fitted, scale
+
+    def __call__(self, pair: Pair) -> torch.Tensor:
+        from synth import analysis_by_synthesis as abs_
+
+        fitted, scale = self._fit(pair)
+        spec, cam, lights = pair.view.physical()
+        target = self._in_photo_units(lights[pair.target], pair.gain, scale)
+        t0 = time.perf_counter()
+        img = abs_.relight(spec, cam, fitted, target, spp=self.render_spp, max_depth=8, seed=self.seed + 1)
+        self.render_seconds.append(time.perf_counter() - t0)
+        relit = torch.from_numpy(np.ascontiguousarray(img, dtype=np.float32)).permute(2, 0, 1)[None]
+        return torch.where(pair.sky(), pair.image(), relit.clamp_min(0.0))
+
+    def seconds_per_image(self) -> float:
+        """Median fit + median render: one photo relit to one target."""
+        if not self.fit_seconds:
+            return float("nan")
+        return float(np.median(self.fit_seconds) + (np.median(self.render_seconds) if self.render_seconds else 0.0))
+
+
+def build_methods(relighter: Any) -> dict[str, Callable[[Pair], torch.Tensor]]:
+    """The six standard methods (:data:`METHODS`), keyed by name."""
+    out: dict[str, Callable[[Pair], torch.Tensor]] = {m: Learned(relighter, m) for m in LEARNED}
+    out["oracle_sh"] = OracleSH(None)
+    out["oracle_sh_shadow"] = OracleSH("true")
+    out["identity"] = Identity()
+    return {k: out[k] for k in METHODS}
