@@ -14,6 +14,12 @@ Sub-subcommands (heavy imports stay inside the handlers):
   and measured ("does the sky follow the SH") on held-out data;
 * ``train segmentation --data DIR --out RUN [--export PATH] [--evaluate DIR --json PATH]``:
   the sky segmenter, optionally exported and scored (IoU vs trivial baselines).
+* ``train renderer --data DIR --out RUN [--inverse W] [--shadow W] [--phase1-steps N]``: the
+  neural renderer on the frozen inverse network + ShadowNet (:mod:`learned.train_renderer`);
+* ``train export-renderer --run RUN [--step N]``: its generator as
+  ``learned/weights/renderer.safetensors``;
+* ``train evaluate-relight --data DIR [--json PATH]``: held-out relighting vs path tracing
+  (l1 / SSIM / PSNR / CIEDE2000 of proposed, lambertian_sh, shadownet_lambertian, identity).
 
 Re-running ``train inverse``/``train shadow`` with the same ``--out`` resumes from the
 latest checkpoint. Under ``torchrun --nproc_per_node N`` the loops run distributed (gloo).
@@ -219,7 +225,8 @@ def _train_renderer(args: argparse.Namespace) -> int:
     cfg = RendererConfig(data=args.data, out=args.out, inverse=args.inverse, shadow=args.shadow, prior=args.prior,
                          val_data=args.val_data, val_split=args.val_split, train_split=args.train_split,
                          width=args.width, depth=args.depth, d_width=args.d_width, res=args.res, batch=args.batch,
-                         steps=args.steps, phase1_steps=args.phase1_steps, cross_scale=args.cross_scale, lr=args.lr,
+                         steps=args.steps, phase1_steps=args.phase1_steps, cross_scale=args.cross_scale,
+                         cross_match_scale=not args.cross_absolute, additive=not args.no_additive, lr=args.lr,
                          lr_d=args.lr_d, seed=args.seed, val_every=args.val_every, val_images=args.val_images,
                          ckpt_every=args.ckpt_every, log_every=args.log_every, threads=args.threads, weights=weights,
                          progress=not args.quiet)
@@ -231,7 +238,14 @@ def _export_renderer(args: argparse.Namespace) -> int:
     from . import checkpoint as ckpt
     from .train_renderer import export_renderer
 
-    side = ckpt.latest_checkpoint(args.run)
+    from pathlib import Path
+
+    if args.step is not None:
+        side = Path(args.run) / "checkpoints" / f"step_{args.step:07d}.json"
+        if not side.is_file():
+            raise ValueError(f"no checkpoint of step {args.step} in {args.run!r}")
+    else:
+        side = ckpt.latest_checkpoint(args.run)
     if side is None:
         raise ValueError(f"no checkpoint in {args.run!r}")
     path = export_renderer(side, args.dest)
@@ -271,12 +285,17 @@ def _add_renderer_stages(tsub: argparse._SubParsersAction) -> None:
                          "consistency and the GAN (default: 2000)")
     rn.add_argument("--cross-scale", type=positive_int, default=4,
                     help="cross-projection compared at 1/N resolution (default: 4)")
+    rn.add_argument("--no-additive", action="store_true",
+                    help="renderer output = Lambertian render x learned gain only (no additive term)")
+    rn.add_argument("--cross-absolute", action="store_true",
+                    help="compare cross-projections without the per-channel scale match")
     rn.add_argument("--d-width", type=positive_int, default=16, help="discriminator width (default: 16)")
     rn.add_argument("--lr-d", type=float, default=2e-4, help="discriminator learning rate (default: 2e-4)")
     rn.set_defaults(handler=_train_renderer)
 
     ex = tsub.add_parser("export-renderer", help="write the renderer's weights-only safetensors")
     ex.add_argument("--run", required=True, help="renderer run folder")
+    ex.add_argument("--step", type=positive_int, default=None, help="checkpoint step (default: the latest)")
     ex.add_argument("--dest", default="learned/weights/renderer.safetensors",
                     help="destination file (default: learned/weights/renderer.safetensors)")
     ex.set_defaults(handler=_export_renderer)

@@ -1,0 +1,258 @@
+"""Held-out relighting evaluation: relit photo vs path-traced ground truth, per method.
+
+The protocol (shared with the benchmark):
+
+* **source**: the LDR photo of (scene, view v, lighting a), linearised with the sRGB curve
+  as a user's photo would be;
+* **target**: the path-traced ``radiance`` of (v, lighting b), ``b != a``, brought into the
+  source photo's units (``radiance * 2**ev_a * wb_gains_a``), sRGB curve, no noise, no
+  JPEG, clipped to [0, 1]; the camera stays, only the light changes;
+* **lighting handed to the methods**: the true camera-frame SH of b and of a, both times
+  ``2**ev_a * wb_gains_a``. Decomposition-based methods (albedo/lighting scale ambiguity)
+  scale the target by the luminance-DC ratio of their own estimated source lighting
+  over the given source lighting;
+* **metrics** on the LDR images over the foreground (not sky, ground-truth normal valid):
+  l1, SSIM (Wang et al., :func:`physrelight.metrics.ssim`), PSNR and CIEDE2000; mean over
+  the (source, target) cases.
+
+Methods: ``proposed`` (decomposition + ShadowNet + neural renderer), ``lambertian_sh``
+(``albedo * shading(n; target)``, the InverseRenderNet-style relighting),
+``shadownet_lambertian`` (times ShadowNet's target shadow) and ``identity`` (the source
+photo unchanged: what doing nothing scores).
+
+The relighting itself goes through one callable with the signature of
+``Relighter.relight_linear(image, sky, target, source_lighting, method)``; :class:`Pipeline`
+provides it from the pieces (inverse network, lighting solve, ShadowNet, renderer), so the
+evaluation can switch to the Relighter's method by passing that instead.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from physrelight import colour, metrics
+from physrelight.lighting_prior import LightingPrior
+from synth.dataset import SynthDataset, to_chw
+
+from . import checkpoint as ckpt
+from .data import load_photo
+from .lighting import WEIGHTS_DIR, load_prior
+from .neural_renderer import NeuralRenderer, lambertian_relit, load_renderer, render_relit
+from .networks import InverseNet, ShadowNet
+from .objectives import decompose_and_solve
+
+__all__ = ["METHODS", "Pipeline", "evaluate_relight", "format_table", "load_shadow", "relight_cases"]
+
+METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity")
+_LUM = torch.tensor([0.2126, 0.7152, 0.0722])
+
+Relight = Callable[..., dict[str, torch.Tensor]]
+
+
+def load_shadow(path: str | Path) -> ShadowNet:
+    """ShadowNet from a run folder (latest checkpoint) or an exported weights file, in eval mode."""
+    p = Path(path)
+    if p.is_dir():
+        side = ckpt.latest_checkpoint(p)
+        if side is None:
+            raise FileNotFoundError(f"no checkpoint in {str(p)!r}")
+        import json
+
+        cfg = json.loads(side.read_text())["config"]
+        net = ShadowNet(cfg["width"], cfg["depth"])
+        ckpt.load_checkpoint(side, net, restore_rng=False)
+    else:
+        tensors, meta = ckpt.load_weights(p)
+        if meta.get("kind") != "shadow":
+            raise ValueError(f"{str(p)!r} holds {meta.get('kind')!r} weights, not a ShadowNet")
+        net = ShadowNet(int(meta["width"]), int(meta["depth"]))
+        net.load_state_dict(tensors)
+    return net.eval()
+
+
+def match_exposure(target: torch.Tensor, estimated_source: torch.Tensor,
+                   given_source: torch.Tensor | None) -> torch.Tensor:
+    """Scale ``target (B, 9, 3)`` into the decomposition's units.
+
+    With ``given_source`` ``(B, 9, 3)``: by ``lum(DC estimated) / lum(DC given)`` (the
+    protocol's fix of the albedo/lighting scale); without: so that the target's DC
+    luminance equals the estimated source lighting's (the photo keeps its exposure).
+    """
+    lum = _LUM.to(target.dtype)
+    est = (estimated_source[:, 0].to(target.dtype) * lum).sum(-1)
+    ref = (given_source[:, 0].to(target.dtype) if given_source is not None else target[:, 0]) * lum
+    ref = ref.sum(-1)
+    if bool((ref <= 0).any()):
+        raise ValueError("the given lighting has no positive DC luminance (dark or invalid)")
+    return target * (est / ref).clamp_min(0)[:, None, None]
+
+
+@dataclass
+class Pipeline:
+    """The relighting pipeline from its pieces (what ``Relighter.relight_linear`` will run).
+
+    Attributes:
+        inverse: the inverse rendering network; shadow_net: ShadowNet; prior: the lighting
+        prior; renderer: the neural renderer or None ("proposed" then falls back to
+        "shadownet_lambertian").
+    """
+
+    inverse: InverseNet
+    shadow_net: ShadowNet
+    prior: LightingPrior
+    renderer: NeuralRenderer | None = None
+
+    @classmethod
+    def load(cls, weights: str | Path | None = None, renderer: str | Path | None = None) -> "Pipeline":
+        """Shipped (or ``weights`` folder) inverse + shadow + prior; renderer from ``renderer`` or
+        ``<weights>/renderer.safetensors`` when that exists."""
+        from .train import load_inverse
+
+        d = Path(weights) if weights is not None else WEIGHTS_DIR
+        if not d.is_dir():
+            raise FileNotFoundError(f"no weights folder at {str(d)!r}")
+        rpath = Path(renderer) if renderer is not None else d / "renderer.safetensors"
+        if renderer is not None and not rpath.is_file():
+            raise FileNotFoundError(f"no renderer weights at {str(rpath)!r}")
+        return cls(load_inverse(d / "inverse.safetensors"), load_shadow(d / "shadow.safetensors"),
+                   load_prior(d / "lighting_prior.npz"), load_renderer(rpath) if rpath.is_file() else None)
+
+    @torch.no_grad()
+    def relight_linear(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
+                       source_lighting: torch.Tensor | None = None,
+                       method: str = "proposed") -> dict[str, torch.Tensor]:
+        """``image (B, 3, H, W)`` linear, ``sky (B, 1, H, W)`` bool, ``target (B, 9, 3)`` camera-frame SH,
+        ``source_lighting (B, 9, 3)`` or None -> dict ``relit (B, 3, H, W)`` (sky = input), ``target``
+        (in the decomposition's units), ``target_shadow`` and the decomposition."""
+        if method not in ("proposed", "lambertian_sh", "shadownet_lambertian"):
+            raise ValueError(f"method must be proposed, lambertian_sh or shadownet_lambertian, got {method!r}")
+        dec = decompose_and_solve(self.inverse, image, sky, self.prior)
+        tgt = match_exposure(target.to(image.dtype), dec["lighting"], source_lighting)
+        ts = self.shadow_net(dec["normals"], tgt)
+        if method == "proposed" and self.renderer is not None:
+            relit = render_relit(self.renderer, image, sky, dec, tgt, ts)
+        else:
+            relit = lambertian_relit(dec, tgt, None if method == "lambertian_sh" else ts)
+            relit = torch.where(sky, image, relit)
+        return {"relit": relit, "target": tgt, "target_shadow": ts, **{k: dec[k] for k in (
+            "albedo", "normals", "shadow", "lighting")}}
+
+
+def relight_cases(ds: SynthDataset) -> list[tuple[str, int, int, int]]:
+    """Every ``(scene, view, source light a, target light b)`` with ``b != a``."""
+    out = []
+    for scene in ds.scenes:
+        nl = ds.num_lights(scene)
+        for v in range(ds.num_views(scene)):
+            for a in range(nl):
+                out.extend((scene, v, a, b) for b in range(nl) if b != a)
+    return out
+
+
+def _gain(params: dict) -> np.ndarray:
+    return 2.0 ** params["ev"] * np.asarray(params["wb_gains"], dtype=np.float64)
+
+
+def load_case(ds: SynthDataset, scene: str, view: int, a: int, b: int, res: int) -> dict[str, torch.Tensor]:
+    """One case: source ``image (3, H, W)`` linear, ``sky``, ``fg`` ``(1, H, W)`` bool, ``target_ldr
+    (3, H, W)``, ``target_sh`` / ``source_sh`` ``(9, 3)`` in the source photo's units."""
+    photo = load_photo(ds, scene, view, a, res)
+    src = ds.load(scene, view, a, keys=("photo_params", "sh", "normal"))
+    dst = ds.load(scene, view, b, keys=("radiance", "sh"))
+    gain = _gain(src["photo_params"])
+    radiance = to_chw((dst["radiance"] * gain[None, None, :]).astype(np.float32))
+    normal = to_chw(src["normal"])
+    if radiance.shape[-1] != res:
+        radiance = F.interpolate(radiance[None], size=(res, res), mode="area")[0]
+        normal = F.interpolate(normal[None], size=(res, res), mode="nearest")[0]
+    target_ldr = colour.to_ldr(radiance.clamp_min(0))
+    fg = ~photo["sky"] & (normal.norm(dim=0, keepdim=True) > 0.5)
+    return {"image": photo["image"], "sky": photo["sky"], "fg": fg, "target_ldr": target_ldr,
+            "target_sh": torch.from_numpy(dst["sh"]["2"] * gain[None, :]).float(),
+            "source_sh": torch.from_numpy(src["sh"]["2"] * gain[None, :]).float()}
+
+
+def _scores(pred: torch.Tensor, target: torch.Tensor, fg: torch.Tensor) -> dict[str, np.ndarray]:
+    """Per-image l1, SSIM, PSNR, CIEDE2000 of LDR ``(B, 3, H, W)`` over ``fg (B, 1, H, W)``."""
+    m = fg.float()
+    return {"l1": metrics.l1(pred, target, m, reduction="none").numpy(),
+            "ssim": metrics.ssim(pred, target, m, reduction="none").numpy(),
+            "psnr": metrics.psnr(pred, target, m, reduction="none").numpy(),
+            "ciede2000": metrics.delta_e2000(pred, target, m, encoding="srgb", reduction="none").numpy()}
+
+
+def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res: int = 64,
+                     max_cases: int | None = None, methods: tuple[str, ...] = METHODS, batch_size: int = 16,
+                     progress: bool = False) -> dict[str, dict[str, float] | float]:
+    """Relighting metrics of each method over the held-out cases.
+
+    Args:
+        relight: ``(image, sky, target, source_lighting, method) -> {"relit": (B, 3, H, W), ...}``
+            (:meth:`Pipeline.relight_linear` or ``Relighter.relight_linear``).
+        root, split: dataset with ground truth (``mode="full"``) and the split to use.
+        res: resolution the pipeline runs at (the inverse network's, 64).
+        max_cases: at most this many cases, evenly spread; None = all.
+        methods: among :data:`METHODS`.
+
+    Returns:
+        ``{method: {"l1", "ssim", "psnr", "ciede2000"}, "cases": n}`` (means over cases;
+        PSNR is the mean of per-case dB).
+    """
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise ValueError(f"unknown methods {bad}; known: {list(METHODS)}")
+    ds = SynthDataset(root, split=split, mode="full")
+    cases = relight_cases(ds)
+    if not cases:
+        raise ValueError(f"{str(root)!r} has no relighting cases in split {split!r} (needs >= 2 lightings)")
+    if max_cases is not None and len(cases) > max_cases:
+        idx = np.linspace(0, len(cases) - 1, max_cases).round().astype(int)
+        cases = [cases[i] for i in idx]
+    acc: dict[str, dict[str, list[np.ndarray]]] = {m: {} for m in methods}
+    count = 0
+    from tqdm import tqdm
+
+    r = 5  # SSIM needs mask pixels at least 5 px from the border
+    for start in tqdm(range(0, len(cases), batch_size), disable=not progress, desc="evaluate relight"):
+        loaded = [load_case(ds, *c, res=res) for c in cases[start:start + batch_size]]
+        loaded = [c for c in loaded if bool(c["fg"][:, r:-r, r:-r].any())]
+        if not loaded:
+            continue
+        batch = {k: torch.stack([c[k] for c in loaded]) for k in loaded[0]}
+        count += len(loaded)
+        for m in methods:
+            if m == "identity":
+                pred = colour.to_ldr(batch["image"])
+            else:
+                with torch.no_grad():
+                    out = relight(batch["image"], batch["sky"], batch["target_sh"], batch["source_sh"], m)
+                pred = colour.to_ldr(out["relit"].clamp_min(0))
+            for k, v in _scores(pred, batch["target_ldr"], batch["fg"]).items():
+                acc[m].setdefault(k, []).append(v)
+    result: dict[str, dict[str, float] | float] = {
+        m: {k: float(np.mean(np.concatenate(v))) for k, v in acc[m].items()} for m in methods}
+    result["cases"] = float(count)
+    return result
+
+
+def format_table(result: dict) -> str:
+    """A markdown table of :func:`evaluate_relight`'s result."""
+    lines = ["| method | l1 | SSIM | PSNR dB | CIEDE2000 |", "| --- | --- | --- | --- | --- |"]
+    for m in METHODS:
+        if m in result:
+            v = result[m]
+            lines.append(f"| {m} | {v['l1']:.4f} | {v['ssim']:.4f} | {v['psnr']:.2f} | {v['ciede2000']:.2f} |")
+    lines.append(f"\n{int(result['cases'])} cases")
+    return "\n".join(lines)
+
+
+def finite(result: dict) -> bool:
+    """True when every metric of every method is finite."""
+    return all(math.isfinite(x) for m in METHODS if m in result for x in result[m].values())

@@ -1,0 +1,280 @@
+"""Training of the neural renderer: ``physrelight train renderer --data DIR --out RUN``.
+
+The inverse network and ShadowNet are frozen (default: the shipped weights); the renderer
+and a 2-scale PatchGAN discriminator train on photo pairs from the self-supervised loader
+(:class:`learned.data.PairSampler`; no ground truth). Two phases as in the paper:
+steps ``[0, phase1_steps)`` minimise self-reconstruction + cross-projection, later steps
+add cycle consistency, the LSGAN and discriminator feature matching
+(:mod:`learned.renderer_objectives`).
+
+Like :mod:`learned.train` the loop is
+
+* **seeded**: networks from ``torch.manual_seed(seed)``, batch ``t`` a pure function of
+  ``(seed, t)``; the frozen decomposition of each photo is computed alone (batch of one)
+  and cached, so it does not depend on which batch first needed it;
+* **resumable to the same numbers**: generator + discriminator in one ``nn.ModuleDict``
+  and both Adam states (``{"g", "d"}``) in safetensors checkpoints; re-running the same
+  command continues bit-identically after a kill;
+* **logged**: ``train.csv``, ``val.csv`` (relighting of held-out scenes against path
+  tracing, :mod:`learned.relight_eval`: l1 / SSIM / PSNR / CIEDE2000 of the renderer and
+  of the Lambertian SH baselines), TensorBoard in ``RUN/tb``, PNG panels, a progress bar.
+
+``physrelight train export-renderer --run RUN`` writes the generator alone as
+``learned/weights/renderer.safetensors`` (kind ``renderer``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from safetensors.torch import load_file
+from torch import nn
+
+from physrelight import io
+
+from . import checkpoint as ckpt
+from .data import Batch, PairSampler
+from .discriminators import MultiscaleDiscriminator
+from .lighting import WEIGHTS_DIR, load_prior
+from .networks import count_parameters
+from .neural_renderer import NeuralRenderer
+from .objectives import decompose_and_solve
+from .relight_eval import Pipeline, evaluate_relight, load_case, load_shadow, relight_cases
+from .renderer_objectives import RendererWeights, discriminator_loss, renderer_losses
+from .train import _Logs, _ldr, load_inverse
+
+__all__ = ["DecompositionCache", "RendererConfig", "export_renderer", "train_renderer"]
+
+
+@dataclass
+class RendererConfig:
+    """Everything that determines a renderer run (recorded in every checkpoint)."""
+
+    data: str
+    out: str
+    inverse: str | None = None
+    shadow: str | None = None
+    prior: str | None = None
+    val_data: str | None = None
+    val_split: str = "val"
+    train_split: str = "train"
+    width: int = 12
+    depth: int = 3
+    d_width: int = 16
+    res: int = 64
+    batch: int = 4
+    steps: int = 3000
+    phase1_steps: int = 2000
+    cross_scale: int = 4
+    cross_match_scale: bool = True
+    additive: bool = True
+    lr: float = 5e-4
+    lr_d: float = 2e-4
+    seed: int = 0
+    val_every: int = 500
+    val_images: int = 96
+    ckpt_every: int = 250
+    log_every: int = 10
+    threads: int = 1
+    weights: dict[str, float] = field(default_factory=lambda: RendererWeights().as_dict())
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("width", "depth", "d_width", "res", "batch", "steps", "cross_scale", "val_every",
+                     "val_images", "ckpt_every", "log_every", "threads"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if isinstance(self.phase1_steps, bool) or not isinstance(self.phase1_steps, int) or self.phase1_steps < 0:
+            raise ValueError(f"phase1_steps must be a non-negative integer, got {self.phase1_steps!r}")
+        for name in ("lr", "lr_d"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if not Path(self.data, "manifest.json").is_file():
+            raise ValueError(f"{self.data!r} is not a dataset folder (no manifest.json)")
+        unknown = set(self.weights) - set(RendererWeights().as_dict())
+        if unknown:
+            raise ValueError(f"unknown loss weights {sorted(unknown)}")
+
+    def identity(self) -> dict[str, Any]:
+        """The fields that must agree for a resume."""
+        skip = {"out", "progress", "steps", "val_every", "val_images", "threads", "val_data", "val_split"}
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
+
+
+class DecompositionCache:
+    """The frozen networks' view of each training photo, computed once, alone (batch of one).
+
+    Per photo: ``albedo``, ``normals``, ``shadow`` ``(C, H, W)``, ``lighting`` ``(9, 3)`` and
+    ``self_shadow`` (ShadowNet on the photo's own lighting). About 130 kB a photo at 64 px.
+    """
+
+    def __init__(self, inverse: nn.Module, shadow_net: nn.Module, prior) -> None:
+        self.inverse, self.shadow_net, self.prior = inverse, shadow_net, prior
+        self._cache: dict[tuple[str, int, int], dict[str, torch.Tensor]] = {}
+
+    @torch.no_grad()
+    def get(self, batch: Batch) -> dict[str, torch.Tensor]:
+        """Stacked decomposition of ``batch.image``: ``(2B, C, H, W)`` and lighting ``(2B, 9, 3)``."""
+        items = []
+        for j, key in enumerate(batch.keys):
+            if key not in self._cache:
+                d = decompose_and_solve(self.inverse, batch.image[j:j + 1], batch.sky[j:j + 1], self.prior)
+                d["self_shadow"] = self.shadow_net(d["normals"], d["lighting"])
+                self._cache[key] = {k: d[k][0] for k in ("albedo", "normals", "shadow", "lighting", "self_shadow")}
+            items.append(self._cache[key])
+        return {k: torch.stack([it[k] for it in items]) for k in items[0]}
+
+
+def _frozen(net: nn.Module) -> nn.Module:
+    for p in net.parameters():
+        p.requires_grad_(False)
+    return net.eval()
+
+
+def build_models(config: RendererConfig) -> nn.ModuleDict:
+    """Generator ``g`` (:class:`NeuralRenderer`) and discriminator ``d``, initialised from the seed."""
+    torch.manual_seed(config.seed)
+    return nn.ModuleDict({"g": NeuralRenderer(config.width, config.depth, config.additive),
+                          "d": MultiscaleDiscriminator(3, config.d_width, layers=3, scales=2)})
+
+
+def train_renderer(config: RendererConfig) -> dict[str, Any]:
+    """Run (or resume) a renderer training run; return the last validation metrics and timings."""
+    torch.set_num_threads(config.threads)
+    run = Path(config.out)
+    (run / "panels").mkdir(parents=True, exist_ok=True)
+    prior = load_prior(config.prior)
+    inverse = _frozen(load_inverse(config.inverse or WEIGHTS_DIR / "inverse.safetensors"))
+    shadow_net = _frozen(load_shadow(config.shadow or WEIGHTS_DIR / "shadow.safetensors"))
+    sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed)
+    cache = DecompositionCache(inverse, shadow_net, prior)
+    weights = RendererWeights(**config.weights)
+
+    models = build_models(config)
+    g, d = models["g"], models["d"]
+    opts = {"g": torch.optim.Adam(g.parameters(), lr=config.lr, betas=(0.5, 0.999)),
+            "d": torch.optim.Adam(d.parameters(), lr=config.lr_d, betas=(0.5, 0.999))}
+
+    start, seconds = 0, 0.0
+    side = ckpt.latest_checkpoint(run)
+    if side is not None:
+        meta = ckpt.load_checkpoint(side, models, opts)
+        if RendererConfig(**{**meta["config"], "out": config.out}).identity() != config.identity():
+            raise ValueError(f"{str(run)!r} holds a run with another configuration; use another --out")
+        start, seconds = int(meta["step"]), float(meta.get("train_seconds", 0.0))
+    if start >= config.steps:
+        print(f"{run}: already at step {start} >= {config.steps}")
+        return {"step": start, "train_seconds": seconds}
+
+    logs = _Logs(run, start, True)
+    if start == 0:
+        io.write_json(run / "config.json", {**asdict(config), "parameters_g": count_parameters(g),
+                                            "parameters_d": count_parameters(d)})
+    from tqdm import tqdm
+
+    bar = tqdm(total=config.steps, initial=start, disable=not config.progress, dynamic_ncols=True,
+               desc="train renderer")
+    val: dict[str, float] = {}
+    models.train()
+    for step in range(start, config.steps):
+        t0 = time.perf_counter()
+        phase = 1 if step < config.phase1_steps else 2
+        batch = sampler.batch(config.batch, step)
+        dec = cache.get(batch)
+        loss, terms, outputs = renderer_losses(g, d if phase == 2 else None, inverse, shadow_net, prior, batch, dec,
+                                               weights, phase, config.cross_scale, config.cross_match_scale)
+        opts["g"].zero_grad(set_to_none=True)
+        loss.backward()
+        gnorm = torch.nn.utils.clip_grad_norm_(g.parameters(), 1.0)
+        opts["g"].step()
+        extra = {}
+        if phase == 2:
+            opts["d"].zero_grad(set_to_none=True)  # drop what the generator's loss left on D
+            d_loss = discriminator_loss(d, batch, outputs)
+            d_loss.backward()
+            opts["d"].step()
+            extra["d_loss"] = float(d_loss.detach())
+        seconds += time.perf_counter() - t0
+        done = step + 1
+        bar.update(1)
+        bar.set_postfix(loss=f"{float(loss.detach()):.4g}", phase=phase)
+        if done % config.log_every == 0 or done == config.steps:
+            logs.write("train.csv", done, {**{k: terms.get(k, math.nan) for k in RendererWeights().as_dict()},
+                                           "total": float(loss.detach()), "d_loss": extra.get("d_loss", math.nan),
+                                           "phase": float(phase), "grad_norm": float(gnorm), "seconds": seconds})
+        if done % config.ckpt_every == 0 or done == config.steps:
+            ckpt.save_checkpoint(run, done, models, opts, {"config": asdict(config), "train_seconds": seconds})
+        if done % config.val_every == 0 or done == config.steps:
+            val = validate(g, inverse, shadow_net, prior, config, panel=run / "panels" / f"step_{done:07d}.png")
+            logs.write("val.csv", done, val)
+            models.train()
+    bar.close()
+    logs.close()
+    io.write_json(run / "summary.json", {"step": config.steps, "train_seconds": seconds,
+                                         "parameters_g": count_parameters(g), "val": val})
+    return {"step": config.steps, "train_seconds": seconds, "val": val}
+
+
+def validate(renderer: NeuralRenderer, inverse: nn.Module, shadow_net: nn.Module, prior, config: RendererConfig,
+             panel: Path | None = None) -> dict[str, float]:
+    """Held-out relighting metrics (flat: ``<method>_<metric>``) and a panel
+    (source | lambertian_sh | shadownet_lambertian | proposed | path-traced target)."""
+    renderer.eval()
+    pipe = Pipeline(inverse, shadow_net, prior, renderer)
+    root = config.val_data or config.data
+    methods = ("proposed", "lambertian_sh", "shadownet_lambertian")
+    result = evaluate_relight(pipe.relight_linear, root, config.val_split, config.res, config.val_images, methods)
+    flat = {f"{m}_{k}": v for m in methods for k, v in result[m].items()}
+    flat["cases"] = result["cases"]
+    if panel is not None:
+        write_relight_panel(panel, pipe, root, config.val_split, config.res)
+    return flat
+
+
+def write_relight_panel(path: Path, pipe: Pipeline, root: str, split: str, res: int, rows: int = 4) -> None:
+    """PNG grid, one row per held-out case: source | lambertian_sh | shadownet_lambertian | proposed | target."""
+    from synth.dataset import SynthDataset
+
+    ds = SynthDataset(root, split=split, mode="full")
+    cases = relight_cases(ds)
+    picks = [cases[i] for i in np.linspace(0, len(cases) - 1, rows).round().astype(int)]
+    tiles = []
+    for c in picks:
+        case = load_case(ds, *c, res=res)
+        image, sky = case["image"][None], case["sky"][None]
+        row = [_ldr(image[0])]
+        for m in ("lambertian_sh", "shadownet_lambertian", "proposed"):
+            out = pipe.relight_linear(image, sky, case["target_sh"][None], case["source_sh"][None], m)
+            row.append(_ldr(out["relit"][0]))
+        row.append(case["target_ldr"].permute(1, 2, 0).numpy())
+        tiles.append(np.concatenate(row, 1))
+    io.write_png(path, np.clip(np.concatenate(tiles, 0), 0, 1))
+
+
+def export_renderer(sidecar: str | Path, dest: str | Path) -> Path:
+    """Write the generator of a renderer checkpoint to ``dest`` (safetensors, weights only,
+    ``kind = "renderer"``, ``width``, ``depth``, ``res``, ``step``, training seconds in the metadata)."""
+    sidecar = Path(sidecar)
+    meta = json.loads(sidecar.read_text())
+    cfg = meta["config"]
+    if "phase1_steps" not in cfg:
+        raise ValueError(f"{str(sidecar)!r} is not a renderer checkpoint")
+    tensors = {k[len("model.g."):]: v for k, v in load_file(str(sidecar.with_suffix(".safetensors"))).items()
+               if k.startswith("model.g.")}
+    info = {"kind": "renderer", "width": str(cfg["width"]), "depth": str(cfg["depth"]), "res": str(cfg["res"]),
+            "additive": "1" if cfg.get("additive", True) else "0",
+            "step": str(meta["step"]), "train_seconds": f"{meta.get('train_seconds', 0.0):.1f}",
+            "config": json.dumps(cfg, sort_keys=True)}
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    ckpt._atomic_save_tensors(tensors, dest, metadata=info)
+    return dest

@@ -1,0 +1,245 @@
+"""Specification of the neural renderer (inputs, inference composition, training, resume, export).
+
+Runs on the tiny rendered dataset of ``conftest.py`` (3 scenes x 2 views x 2 lightings, 24 px)
+with tiny networks; the frozen inverse network and ShadowNet are tiny random ones exported
+here, so the tests do not depend on the shipped weights.
+"""
+
+from __future__ import annotations
+
+import csv
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from learned import checkpoint as ckpt
+from learned.data import PairSampler
+from learned.lighting import load_prior
+from learned.networks import InverseNet, ShadowNet
+from learned.neural_renderer import NeuralRenderer, load_renderer, positive, render_relit, renderer_inputs
+from learned.objectives import decompose_and_solve
+from learned.relight_eval import Pipeline, evaluate_relight, match_exposure
+from learned.renderer_objectives import PHASE2_TERMS, downsample_masked
+from learned.train_renderer import RendererConfig, export_renderer, train_renderer
+from physrelight import image_model
+
+
+def _save(net: torch.nn.Module, path: Path, kind: str) -> Path:
+    """Export a module the way ``train export`` does (weights + kind/width/depth metadata)."""
+    from learned.checkpoint import _atomic_save_tensors
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _atomic_save_tensors(dict(net.state_dict()), path, {"kind": kind, "width": str(net.width),
+                                                        "depth": str(net.depth), "res": "24"})
+    return path
+
+
+@pytest.fixture(scope="module")
+def frozen(tmp_path_factory, tiny_prior: Path) -> Path:
+    """A weights folder with a tiny inverse network, ShadowNet and the tiny prior."""
+    d = tmp_path_factory.mktemp("frozen")
+    torch.manual_seed(11)
+    _save(InverseNet(4, 2), d / "inverse.safetensors", "inverse")
+    _save(ShadowNet(4, 2), d / "shadow.safetensors", "shadow")
+    shutil.copy(tiny_prior, d / "lighting_prior.npz")
+    return d
+
+
+def config(data: Path, out: Path, weights: Path, **kw) -> RendererConfig:
+    base = dict(data=str(data), out=str(out), inverse=str(weights / "inverse.safetensors"),
+                shadow=str(weights / "shadow.safetensors"), prior=str(weights / "lighting_prior.npz"),
+                train_split="all", val_split="all", width=4, depth=2, d_width=4, res=24, batch=2, steps=6,
+                phase1_steps=3, val_every=1000, val_images=4, ckpt_every=3, log_every=1, threads=1, seed=3,
+                progress=False, lr=3e-3)
+    base.update(kw)
+    return RendererConfig(**base)
+
+
+def rows(path: Path) -> list[dict[str, str]]:
+    with path.open() as f:
+        return list(csv.DictReader(f))
+
+
+def _decomposition(b: int = 2, h: int = 12, w: int = 16, seed: int = 0) -> dict[str, torch.Tensor]:
+    g = torch.Generator().manual_seed(seed)
+    n = torch.randn(b, 3, h, w, generator=g)
+    n[:, 2] = n[:, 2].abs() + 0.5
+    lighting = torch.zeros(b, 9, 3)
+    lighting[:, 0] = 2.0
+    lighting[:, 2] = 1.0  # light from the camera side: positive shading
+    return {"albedo": torch.rand(b, 3, h, w, generator=g), "normals": n / n.norm(dim=1, keepdim=True),
+            "shadow": torch.rand(b, 1, h, w, generator=g), "lighting": lighting}
+
+
+def test_01_the_14_channels_are_assembled_in_the_documented_order() -> None:
+    dec = _decomposition()
+    image = torch.rand(2, 3, 12, 16)
+    sky = torch.zeros(2, 1, 12, 16, dtype=torch.bool)
+    sky[:, :, :3] = True
+    target = dec["lighting"] * 0.5
+    ts = torch.rand(2, 1, 12, 16)
+    x = renderer_inputs(image, sky, dec["albedo"], dec["normals"], dec["shadow"], dec["lighting"], target, ts)
+    assert x.shape == (2, 14, 12, 16)
+    fg = ~sky[:, 0]
+    torch.testing.assert_close(x[:, 0:3].permute(0, 2, 3, 1)[fg], dec["albedo"].permute(0, 2, 3, 1)[fg])
+    torch.testing.assert_close(x[:, 3:6].permute(0, 2, 3, 1)[fg], dec["normals"].permute(0, 2, 3, 1)[fg])
+    shading = image_model.shading(dec["normals"], target)
+    torch.testing.assert_close(x[:, 6:9].permute(0, 2, 3, 1)[fg], shading.permute(0, 2, 3, 1)[fg])
+    torch.testing.assert_close(x[:, 9][fg], ts[:, 0][fg])
+    assert torch.equal(x[:, 10], sky[:, 0].float())
+    # residual: the photo minus its Lambertian re-rendering with the SOURCE lighting and shadow
+    res = image - dec["albedo"] * image_model.shading(dec["normals"], dec["lighting"]) * dec["shadow"]
+    torch.testing.assert_close(x[:, 11:14].permute(0, 2, 3, 1)[fg], res.permute(0, 2, 3, 1)[fg])
+    assert float(x[:, [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13]].permute(0, 2, 3, 1)[sky[:, 0]].abs().max()) == 0.0
+
+
+def test_02_bad_shapes_raise_value_errors_naming_them() -> None:
+    dec = _decomposition()
+    image = torch.rand(2, 3, 12, 16)
+    sky = torch.zeros(2, 1, 12, 16, dtype=torch.bool)
+    ts = torch.rand(2, 1, 12, 16)
+    args = [image, sky, dec["albedo"], dec["normals"], dec["shadow"], dec["lighting"], dec["lighting"], ts]
+    bad = {2: (torch.rand(2, 3, 12, 15), r"albedo has shape \(2, 3, 12, 15\)"),
+           0: (torch.rand(3, 12, 16), r"image must be .*\(B, 3, H, W\), got \(3, 12, 16\)"),
+           7: (torch.rand(2, 3, 12, 16), r"target_shadow must be .*\(B, 1, H, W\), got \(2, 3, 12, 16\)"),
+           6: (torch.rand(2, 4, 3), r"target_lighting must have shape \(2, 9, 3\), got \(2, 4, 3\)"),
+           1: (torch.zeros(2, 1, 12, 16), "sky must be a bool")}
+    for i, (value, message) in bad.items():
+        with pytest.raises(ValueError, match=message):
+            renderer_inputs(*[value if j == i else a for j, a in enumerate(args)])
+    with pytest.raises(ValueError, match=r"\(B, 14, H, W\)"):
+        NeuralRenderer(4, 2)(torch.rand(1, 11, 8, 8))
+    with pytest.raises(ValueError, match="lacks 'lighting'"):
+        render_relit(NeuralRenderer(4, 2), image, sky, {k: dec[k] for k in ("albedo", "normals", "shadow")},
+                     dec["lighting"], ts)
+
+
+def test_03_render_relit_keeps_the_sky_and_starts_at_the_shadowed_lambertian_render() -> None:
+    torch.manual_seed(0)
+    dec = _decomposition(seed=1)
+    image = torch.rand(2, 3, 12, 16) * 5.0  # a bright sky the network never sees
+    sky = torch.zeros(2, 1, 12, 16, dtype=torch.bool)
+    sky[0, :, :4] = True
+    sky[1, :, :, 10:] = True
+    ts = torch.rand(2, 1, 12, 16)
+    target = dec["lighting"] * torch.tensor([1.0, 0.7, 0.4])
+    net = NeuralRenderer(4, 2).eval()
+    with torch.no_grad():
+        relit = render_relit(net, image, sky, dec, target, ts)
+        # the head starts at gain 1 + small: close to the ShadowNet + Lambertian render
+        base = image_model.render(dec["albedo"], dec["normals"], target, ts)
+        torch.nn.init.zeros_(net.unet.head.weight)
+        exact = render_relit(net, image, sky, dec, target, ts)
+    assert torch.equal(relit[sky.expand_as(relit)], image[sky.expand_as(image)])  # bit for bit
+    assert float(relit.min()) > 0
+    fg = (~sky).expand_as(relit)
+    torch.testing.assert_close(exact[fg], positive(base)[fg])
+    assert float((relit - exact)[fg].abs().max()) < 0.05
+    gain_only = NeuralRenderer(4, 2, additive=False).eval()
+    torch.nn.init.zeros_(gain_only.unet.head.weight)
+    with torch.no_grad():
+        torch.testing.assert_close(render_relit(gain_only, image, sky, dec, target, ts)[fg], positive(base)[fg])
+    # the output unit is >= 0, monotone and the identity above tau
+    x = torch.linspace(-1, 1, 2001)
+    y = positive(x)
+    assert float(y.min()) >= 0 and torch.equal(y[x >= 1e-3], x[x >= 1e-3])
+    assert float((y[1:] - y[:-1]).min()) >= 0
+
+
+def test_04_exposure_matching_follows_the_protocol() -> None:
+    target = torch.zeros(1, 9, 3)
+    target[0, 0] = torch.tensor([2.0, 2.0, 2.0])
+    est = torch.zeros(1, 9, 3)
+    est[0, 0] = torch.tensor([0.5, 0.5, 0.5])
+    given = torch.zeros(1, 9, 3)
+    given[0, 0] = torch.tensor([1.0, 1.0, 1.0])
+    torch.testing.assert_close(match_exposure(target, est, given), target * 0.5)  # est / given
+    torch.testing.assert_close(match_exposure(target, est, None), target * 0.25)  # DC equal to est
+    with pytest.raises(ValueError, match="DC luminance"):
+        match_exposure(target, est, -given)
+
+
+def test_05_masked_downsampling_averages_only_masked_pixels() -> None:
+    x = torch.arange(16.0).reshape(1, 1, 4, 4)
+    m = torch.zeros(1, 1, 4, 4)
+    m[..., :2, :2] = 1.0
+    m[..., 0, 2] = 1.0
+    y, valid = downsample_masked(x, m, 2)
+    assert float(y[0, 0, 0, 0]) == pytest.approx((0 + 1 + 4 + 5) / 4)
+    assert float(valid[0, 0, 0, 0]) == 1.0 and float(valid[0, 0, 0, 1]) == 0.0  # 1/4 covered < 1/2
+
+
+def test_06_a_tiny_run_lowers_the_self_reconstruction_loss(tiny_dataset: Path, frozen: Path, tmp_path: Path) -> None:
+    cfg = config(tiny_dataset, tmp_path / "run", frozen, steps=40, phase1_steps=34, ckpt_every=40, val_every=40,
+                 batch=2, lr=5e-3)
+    result = train_renderer(cfg)
+    log = rows(tmp_path / "run" / "train.csv")
+    self_lab = np.array([float(r["self_lab"]) for r in log])
+    assert len(self_lab) == 40 and np.all(np.isfinite(self_lab))
+    assert self_lab[24:34].mean() < 0.7 * self_lab[:10].mean()
+    phase2 = [r for r in log if r["phase"] == "2"]
+    assert len(phase2) == 6 and all(np.isfinite(float(r[k])) for r in phase2 for k in (*PHASE2_TERMS, "d_loss"))
+    assert all(r[k] == "nan" for r in log[:34] for k in PHASE2_TERMS)  # phase 1: self + cross only
+    for key in ("proposed_l1", "proposed_ssim", "lambertian_sh_psnr", "shadownet_lambertian_l1"):
+        assert np.isfinite(result["val"][key]), key
+    assert (tmp_path / "run" / "panels" / "step_0000040.png").is_file()
+    assert list((tmp_path / "run" / "tb").iterdir())
+
+
+def test_07_resume_after_a_kill_is_bit_identical_through_both_phases(tiny_dataset: Path, frozen: Path,
+                                                                     tmp_path: Path) -> None:
+    train_renderer(config(tiny_dataset, tmp_path / "straight", frozen))
+    train_renderer(config(tiny_dataset, tmp_path / "killed", frozen, steps=5))  # dies after step 5...
+    for ext in ("safetensors", "json"):
+        (tmp_path / "killed" / "checkpoints" / f"step_0000005.{ext}").unlink()  # ...before saving it
+    torch.manual_seed(999)  # another global RNG state must not matter
+    train_renderer(config(tiny_dataset, tmp_path / "killed", frozen))
+    ta = load_file(str(tmp_path / "straight" / "checkpoints" / "step_0000006.safetensors"))
+    tb = load_file(str(tmp_path / "killed" / "checkpoints" / "step_0000006.safetensors"))
+    assert ta.keys() == tb.keys()
+    assert any(k.startswith("model.g.") for k in ta) and any(k.startswith("model.d.") for k in ta)
+    assert any(k.startswith("optim.g.") for k in ta) and any(k.startswith("optim.d.") for k in ta)  # D trained
+    for k in ta:
+        assert torch.equal(ta[k], tb[k]), k
+    la, lb = rows(tmp_path / "straight" / "train.csv"), rows(tmp_path / "killed" / "train.csv")
+    assert [r["step"] for r in lb] == [str(i) for i in range(1, 7)]
+    for key in ("total", "d_loss"):
+        assert [r[key] for r in la] == [r[key] for r in lb], key
+    with pytest.raises(ValueError, match="another configuration"):
+        train_renderer(config(tiny_dataset, tmp_path / "killed", frozen, steps=8, phase1_steps=2))
+
+
+def test_08_exported_weights_round_trip_and_plug_into_the_pipeline(tiny_dataset: Path, frozen: Path,
+                                                                   tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    train_renderer(config(tiny_dataset, run, frozen, steps=3, ckpt_every=3))
+    dest = export_renderer(ckpt.latest_checkpoint(run), tmp_path / "w" / "renderer.safetensors")
+    net = load_renderer(dest)
+    meta = ckpt.load_weights(dest)[1]
+    assert meta["kind"] == "renderer" and (meta["width"], meta["depth"], meta["additive"]) == ("4", "2", "1")
+    models = {k[len("model.g."):]: v for k, v in load_file(str(ckpt.latest_checkpoint(run).with_suffix(
+        ".safetensors"))).items() if k.startswith("model.g.")}
+    state = net.state_dict()
+    assert state.keys() == models.keys() and all(torch.equal(state[k], models[k]) for k in state)
+    with pytest.raises(ValueError, match="not a neural renderer"):
+        load_renderer(frozen / "shadow.safetensors")
+    # the pipeline uses it: "proposed" now differs from the ShadowNet + Lambertian fallback
+    for f in ("inverse.safetensors", "shadow.safetensors", "lighting_prior.npz"):
+        shutil.copy(frozen / f, tmp_path / "w" / f)
+    pipe = Pipeline.load(tmp_path / "w")
+    assert pipe.renderer is not None
+    batch = PairSampler(tiny_dataset, split="all", res=24).batch(1, 0)
+    image, sky = batch.image[:1], batch.sky[:1]
+    target = decompose_and_solve(pipe.inverse, image, sky, load_prior(frozen / "lighting_prior.npz"))["lighting"]
+    prop = pipe.relight_linear(image, sky, target.flip(1).abs(), None, "proposed")
+    fall = pipe.relight_linear(image, sky, target.flip(1).abs(), None, "shadownet_lambertian")
+    assert torch.equal(prop["relit"][sky.expand_as(image)], image[sky.expand_as(image)])
+    assert not torch.equal(prop["relit"], fall["relit"])
+    result = evaluate_relight(pipe.relight_linear, tiny_dataset, "all", 24, max_cases=4)
+    assert result["cases"] >= 1 and result["identity"]["l1"] > 0
+    for m in ("proposed", "lambertian_sh", "shadownet_lambertian", "identity"):
+        assert 0 <= result[m]["l1"] <= 1 and -1 <= result[m]["ssim"] <= 1, m
