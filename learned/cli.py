@@ -256,10 +256,11 @@ def _export_renderer(args: argparse.Namespace) -> int:
 def _evaluate_relight(args: argparse.Namespace) -> int:
     import torch
 
-    from .relight_eval import Pipeline, evaluate_relight, format_table
+    from .relight_eval import evaluate_relight, format_table
+    from .relighter import Relighter
 
     torch.set_num_threads(args.threads)
-    pipe = Pipeline.load(args.weights, args.renderer)
+    pipe = Relighter.load(args.weights, args.renderer)
     if pipe.renderer is None:
         print("note: no renderer weights found; 'proposed' falls back to shadownet_lambertian")
     result = evaluate_relight(pipe.relight_linear, args.data, args.split, args.res, args.max_cases,

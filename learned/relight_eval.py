@@ -21,15 +21,13 @@ Methods: ``proposed`` (decomposition + ShadowNet + neural renderer), ``lambertia
 photo unchanged: what doing nothing scores).
 
 The relighting itself goes through one callable with the signature of
-``Relighter.relight_linear(image, sky, target, source_lighting, method)``; :class:`Pipeline`
-provides it from the pieces (inverse network, lighting solve, ShadowNet, renderer), so the
-evaluation can switch to the Relighter's method by passing that instead.
+:meth:`learned.Relighter.relight_linear` ``(image, sky, target, source_lighting, method)``
+(a Relighter built from the shipped weights, or from the networks of a training run).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -38,111 +36,15 @@ import torch
 import torch.nn.functional as F
 
 from physrelight import colour, metrics
-from physrelight.lighting_prior import LightingPrior
 from synth.dataset import SynthDataset, to_chw
 
-from . import checkpoint as ckpt
 from .data import load_photo
-from .lighting import WEIGHTS_DIR, load_prior
-from .neural_renderer import NeuralRenderer, lambertian_relit, load_renderer, render_relit
-from .networks import InverseNet, ShadowNet
-from .objectives import decompose_and_solve
 
-__all__ = ["METHODS", "Pipeline", "evaluate_relight", "format_table", "load_shadow", "relight_cases"]
+__all__ = ["METHODS", "evaluate_relight", "format_table", "relight_cases"]
 
 METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity")
-_LUM = torch.tensor([0.2126, 0.7152, 0.0722])
 
 Relight = Callable[..., dict[str, torch.Tensor]]
-
-
-def load_shadow(path: str | Path) -> ShadowNet:
-    """ShadowNet from a run folder (latest checkpoint) or an exported weights file, in eval mode."""
-    p = Path(path)
-    if p.is_dir():
-        side = ckpt.latest_checkpoint(p)
-        if side is None:
-            raise FileNotFoundError(f"no checkpoint in {str(p)!r}")
-        import json
-
-        cfg = json.loads(side.read_text())["config"]
-        net = ShadowNet(cfg["width"], cfg["depth"])
-        ckpt.load_checkpoint(side, net, restore_rng=False)
-    else:
-        tensors, meta = ckpt.load_weights(p)
-        if meta.get("kind") != "shadow":
-            raise ValueError(f"{str(p)!r} holds {meta.get('kind')!r} weights, not a ShadowNet")
-        net = ShadowNet(int(meta["width"]), int(meta["depth"]))
-        net.load_state_dict(tensors)
-    return net.eval()
-
-
-def match_exposure(target: torch.Tensor, estimated_source: torch.Tensor,
-                   given_source: torch.Tensor | None) -> torch.Tensor:
-    """Scale ``target (B, 9, 3)`` into the decomposition's units.
-
-    With ``given_source`` ``(B, 9, 3)``: by ``lum(DC estimated) / lum(DC given)`` (the
-    protocol's fix of the albedo/lighting scale); without: so that the target's DC
-    luminance equals the estimated source lighting's (the photo keeps its exposure).
-    """
-    lum = _LUM.to(target.dtype)
-    est = (estimated_source[:, 0].to(target.dtype) * lum).sum(-1)
-    ref = (given_source[:, 0].to(target.dtype) if given_source is not None else target[:, 0]) * lum
-    ref = ref.sum(-1)
-    if bool((ref <= 0).any()):
-        raise ValueError("the given lighting has no positive DC luminance (dark or invalid)")
-    return target * (est / ref).clamp_min(0)[:, None, None]
-
-
-@dataclass
-class Pipeline:
-    """The relighting pipeline from its pieces (what ``Relighter.relight_linear`` will run).
-
-    Attributes:
-        inverse: the inverse rendering network; shadow_net: ShadowNet; prior: the lighting
-        prior; renderer: the neural renderer or None ("proposed" then falls back to
-        "shadownet_lambertian").
-    """
-
-    inverse: InverseNet
-    shadow_net: ShadowNet
-    prior: LightingPrior
-    renderer: NeuralRenderer | None = None
-
-    @classmethod
-    def load(cls, weights: str | Path | None = None, renderer: str | Path | None = None) -> "Pipeline":
-        """Shipped (or ``weights`` folder) inverse + shadow + prior; renderer from ``renderer`` or
-        ``<weights>/renderer.safetensors`` when that exists."""
-        from .train import load_inverse
-
-        d = Path(weights) if weights is not None else WEIGHTS_DIR
-        if not d.is_dir():
-            raise FileNotFoundError(f"no weights folder at {str(d)!r}")
-        rpath = Path(renderer) if renderer is not None else d / "renderer.safetensors"
-        if renderer is not None and not rpath.is_file():
-            raise FileNotFoundError(f"no renderer weights at {str(rpath)!r}")
-        return cls(load_inverse(d / "inverse.safetensors"), load_shadow(d / "shadow.safetensors"),
-                   load_prior(d / "lighting_prior.npz"), load_renderer(rpath) if rpath.is_file() else None)
-
-    @torch.no_grad()
-    def relight_linear(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
-                       source_lighting: torch.Tensor | None = None,
-                       method: str = "proposed") -> dict[str, torch.Tensor]:
-        """``image (B, 3, H, W)`` linear, ``sky (B, 1, H, W)`` bool, ``target (B, 9, 3)`` camera-frame SH,
-        ``source_lighting (B, 9, 3)`` or None -> dict ``relit (B, 3, H, W)`` (sky = input), ``target``
-        (in the decomposition's units), ``target_shadow`` and the decomposition."""
-        if method not in ("proposed", "lambertian_sh", "shadownet_lambertian"):
-            raise ValueError(f"method must be proposed, lambertian_sh or shadownet_lambertian, got {method!r}")
-        dec = decompose_and_solve(self.inverse, image, sky, self.prior)
-        tgt = match_exposure(target.to(image.dtype), dec["lighting"], source_lighting)
-        ts = self.shadow_net(dec["normals"], tgt)
-        if method == "proposed" and self.renderer is not None:
-            relit = render_relit(self.renderer, image, sky, dec, tgt, ts)
-        else:
-            relit = lambertian_relit(dec, tgt, None if method == "lambertian_sh" else ts)
-            relit = torch.where(sky, image, relit)
-        return {"relit": relit, "target": tgt, "target_shadow": ts, **{k: dec[k] for k in (
-            "albedo", "normals", "shadow", "lighting")}}
 
 
 def relight_cases(ds: SynthDataset) -> list[tuple[str, int, int, int]]:
@@ -195,7 +97,7 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
 
     Args:
         relight: ``(image, sky, target, source_lighting, method) -> {"relit": (B, 3, H, W), ...}``
-            (:meth:`Pipeline.relight_linear` or ``Relighter.relight_linear``).
+            (``Relighter.relight_linear``).
         root, split: dataset with ground truth (``mode="full"``) and the split to use.
         res: resolution the pipeline runs at (the inverse network's, 64).
         max_cases: at most this many cases, evenly spread; None = all.

@@ -36,7 +36,8 @@ from .lighting import WEIGHTS_DIR, load_prior
 from .networks import InverseNet, ShadowNet
 from .objectives import decompose_and_solve
 
-__all__ = ["RELIGHT_METHODS", "SKY_TYPES", "Relighter", "rotate_azimuth", "sun_lighting",
+__all__ = ["RELIGHT_METHODS", "SKY_TYPES", "Relighter", "dc_luminance", "match_exposure", "rotate_azimuth",
+           "sun_lighting",
            "transfer_to_full_resolution", "working_resolution"]
 
 
@@ -117,11 +118,11 @@ class Relighter:
         self.sky_generator = sky_generator.eval() if sky_generator is not None else None
 
     @classmethod
-    def load(cls, path: str | os.PathLike | None = None) -> "Relighter":
+    def load(cls, path: str | os.PathLike | None = None, renderer: str | os.PathLike | None = None) -> "Relighter":
         """Load ``inverse.safetensors``, ``shadow.safetensors``, ``lighting_prior.npz`` and, when
         present, ``renderer.safetensors``, ``sky_segmentation.safetensors`` and
         ``sky_gan.safetensors`` from ``path`` (a folder; None = the weights shipped in the
-        package)."""
+        package). ``renderer`` names another renderer weights file."""
         d = Path(path) if path is not None else WEIGHTS_DIR
         if not d.is_dir():
             raise FileNotFoundError(f"no weights folder at {str(d)!r}")
@@ -134,11 +135,14 @@ class Relighter:
         shadow = ShadowNet(int(sh_m["width"]), int(sh_m["depth"]))
         shadow.load_state_dict(sh_t)
         # The second stage, each part when its weights are there.
-        renderer = segmenter = generator = None
-        if (d / "renderer.safetensors").is_file():
+        segmenter = generator = None
+        rpath = Path(renderer) if renderer is not None else d / "renderer.safetensors"
+        if renderer is not None and not rpath.is_file():
+            raise FileNotFoundError(f"no renderer weights at {str(rpath)!r}")
+        if rpath.is_file():
             from .neural_renderer import load_renderer
 
-            renderer = load_renderer(d / "renderer.safetensors")
+            renderer = load_renderer(rpath)
         if (d / "sky_segmentation.safetensors").is_file():
             from .sky_segmentation import load_sky_segmenter
 
@@ -202,12 +206,6 @@ class Relighter:
             raise ValueError("target holds NaN or inf")
         return torch.as_tensor(sh.rotate(coeffs, _rotation(world_to_camera)))
 
-    @staticmethod
-    def _dc_luminance(lighting: torch.Tensor) -> torch.Tensor:
-        """``(B, 9, 3)`` -> ``(B,)`` luminance of the DC term (the lighting's overall level)."""
-        lum = torch.tensor([0.2126, 0.7152, 0.0722], dtype=lighting.dtype)
-        return (lighting[:, 0] * lum).sum(-1)
-
     @torch.no_grad()
     def relight_linear(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
                        source_lighting: torch.Tensor | None = None, method: str = "proposed") -> dict[str, torch.Tensor]:
@@ -254,17 +252,8 @@ class Relighter:
 
         tgt = batch_sh(target, "target")
         out = self.decompose_linear(image.float(), sky.bool())
-        ref = tgt if source_lighting is None else batch_sh(source_lighting, "source_lighting")
-        ref_dc = self._dc_luminance(ref)
-        if bool((ref_dc <= 0).any()) or bool((self._dc_luminance(tgt) <= 0).any()):
-            raise ValueError("target (or source) lighting has no positive DC term (a dark or invalid lighting)")
-        est_dc = self._dc_luminance(out["lighting"])
-        # A degenerate estimate (no usable foreground, e.g. a photo that is nearly all sky) has no
-        # level to match: fall back on the outdoor prior's mean level (photo units).
-        prior_dc = self._dc_luminance(self.prior.mean.reshape(1, 9, 3).to(est_dc.dtype))
-        est_dc = torch.where(est_dc > 1e-6 * prior_dc, est_dc, prior_dc)
-        scale = (est_dc / ref_dc)[:, None, None]
-        tgt = tgt * scale
+        source = None if source_lighting is None else batch_sh(source_lighting, "source_lighting")
+        tgt = match_exposure(tgt, out["lighting"], source, fallback=self.prior.mean.reshape(1, 9, 3))
         if method == "lambertian_sh":
             s = torch.ones_like(out["shadow"])
         else:
@@ -369,6 +358,36 @@ class Relighter:
 
 
 RELIGHT_METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian")
+
+
+def dc_luminance(lighting: torch.Tensor) -> torch.Tensor:
+    """``(B, 9, 3)`` radiance SH -> ``(B,)`` luminance of the DC term (the lighting's overall level)."""
+    lum = torch.tensor([0.2126, 0.7152, 0.0722], dtype=lighting.dtype)
+    return (lighting[:, 0] * lum).sum(-1)
+
+
+def match_exposure(target: torch.Tensor, estimated_source: torch.Tensor, given_source: torch.Tensor | None = None,
+                   fallback: torch.Tensor | None = None) -> torch.Tensor:
+    """Scale ``target (B, 9, 3)`` into a decomposition's units.
+
+    The decomposition's albedo and lighting share an unknown scale. With ``given_source``
+    ``(B, 9, 3)`` (the source lighting in the target's units) the target is scaled by
+    ``lum(DC estimated) / lum(DC given)``; without it, so that its DC luminance equals the
+    estimated source lighting's (the photo keeps its exposure). Where the estimate has no
+    positive level (below 1e-6 of ``fallback``'s, e.g. a photo without usable foreground),
+    ``fallback`` ``(1 or B, 9, 3)`` (the prior's mean) stands in for it.
+
+    Raises:
+        ValueError: the target (or the given source) has no positive DC luminance.
+    """
+    ref = dc_luminance(given_source.to(target.dtype) if given_source is not None else target)
+    if bool((ref <= 0).any()) or bool((dc_luminance(target) <= 0).any()):
+        raise ValueError("target (or source) lighting has no positive DC luminance (a dark or invalid lighting)")
+    est = dc_luminance(estimated_source.to(target.dtype))
+    if fallback is not None:
+        fb = dc_luminance(fallback.to(target.dtype)).expand_as(est)
+        est = torch.where(est > 1e-6 * fb, est, fb)
+    return target * (est.clamp_min(0) / ref)[:, None, None]
 SKY_TYPES = ("clear", "overcast")
 
 

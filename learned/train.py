@@ -44,7 +44,7 @@ from .lighting import load_prior
 from .networks import InverseNet, ShadowNet, count_parameters
 from .objectives import LossWeights, decompose_and_solve, inverse_losses
 
-__all__ = ["TrainConfig", "build_inverse", "load_inverse", "train"]
+__all__ = ["TrainConfig", "build_inverse", "load_inverse", "load_network", "load_shadow", "train"]
 
 STAGES = ("inverse", "shadow")
 
@@ -105,8 +105,14 @@ def build_inverse(width: int, depth: int, seed: int) -> InverseNet:
     return InverseNet(width, depth)
 
 
-def load_inverse(path: str | Path) -> InverseNet:
-    """An inverse network from a run folder (latest checkpoint) or an exported weights file."""
+_NETWORKS = {"inverse": InverseNet, "shadow": ShadowNet}
+
+
+def load_network(path: str | Path, kind: str) -> torch.nn.Module:
+    """An ``"inverse"`` or ``"shadow"`` network from a run folder (latest checkpoint) or an
+    exported weights file (its metadata must say ``kind``), in eval mode."""
+    if kind not in _NETWORKS:
+        raise ValueError(f"kind must be one of {sorted(_NETWORKS)}, got {kind!r}")
     p = Path(path)
     if p.is_dir():
         side = ckpt.latest_checkpoint(p)
@@ -115,15 +121,25 @@ def load_inverse(path: str | Path) -> InverseNet:
         import json
 
         cfg = json.loads(side.read_text())["config"]
-        net = InverseNet(cfg["width"], cfg["depth"])
+        net = _NETWORKS[kind](cfg["width"], cfg["depth"])
         ckpt.load_checkpoint(side, net, restore_rng=False)
     else:
         tensors, meta = ckpt.load_weights(p)
-        if meta.get("kind") != "inverse":
-            raise ValueError(f"{str(p)!r} holds {meta.get('kind')!r} weights, not an inverse network")
-        net = InverseNet(int(meta["width"]), int(meta["depth"]))
+        if meta.get("kind") != kind:
+            raise ValueError(f"{str(p)!r} holds {meta.get('kind')!r} weights, not {kind!r} ones")
+        net = _NETWORKS[kind](int(meta["width"]), int(meta["depth"]))
         net.load_state_dict(tensors)
     return net.eval()
+
+
+def load_inverse(path: str | Path) -> InverseNet:
+    """The inverse network of a run folder or an exported weights file (:func:`load_network`)."""
+    return load_network(path, "inverse")
+
+
+def load_shadow(path: str | Path) -> ShadowNet:
+    """ShadowNet of a run folder or an exported weights file (:func:`load_network`)."""
+    return load_network(path, "shadow")
 
 
 # ------------------------------------------------------------------------- distributed

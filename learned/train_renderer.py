@@ -46,9 +46,10 @@ from .lighting import WEIGHTS_DIR, load_prior
 from .networks import count_parameters
 from .neural_renderer import NeuralRenderer
 from .objectives import decompose_and_solve
-from .relight_eval import Pipeline, evaluate_relight, load_case, load_shadow, relight_cases
+from .relight_eval import evaluate_relight, load_case, relight_cases
+from .relighter import Relighter
 from .renderer_objectives import RendererWeights, discriminator_loss, renderer_losses
-from .train import _Logs, _ldr, load_inverse
+from .train import _Logs, _ldr, load_inverse, load_shadow
 
 __all__ = ["DecompositionCache", "RendererConfig", "export_renderer", "train_renderer"]
 
@@ -229,7 +230,7 @@ def validate(renderer: NeuralRenderer, inverse: nn.Module, shadow_net: nn.Module
     """Held-out relighting metrics (flat: ``<method>_<metric>``) and a panel
     (source | lambertian_sh | shadownet_lambertian | proposed | path-traced target)."""
     renderer.eval()
-    pipe = Pipeline(inverse, shadow_net, prior, renderer)
+    pipe = Relighter(inverse, shadow_net, prior, config.res, renderer)
     root = config.val_data or config.data
     methods = ("proposed", "lambertian_sh", "shadownet_lambertian")
     result = evaluate_relight(pipe.relight_linear, root, config.val_split, config.res, config.val_images, methods)
@@ -240,7 +241,7 @@ def validate(renderer: NeuralRenderer, inverse: nn.Module, shadow_net: nn.Module
     return flat
 
 
-def write_relight_panel(path: Path, pipe: Pipeline, root: str, split: str, res: int, rows: int = 4) -> None:
+def write_relight_panel(path: Path, pipe: Relighter, root: str, split: str, res: int, rows: int = 4) -> None:
     """PNG grid, one row per held-out case: source | lambertian_sh | shadownet_lambertian | proposed | target."""
     from synth.dataset import SynthDataset
 

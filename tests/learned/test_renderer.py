@@ -22,7 +22,8 @@ from learned.lighting import load_prior
 from learned.networks import InverseNet, ShadowNet
 from learned.neural_renderer import NeuralRenderer, load_renderer, positive, render_relit, renderer_inputs
 from learned.objectives import decompose_and_solve
-from learned.relight_eval import Pipeline, evaluate_relight, match_exposure
+from learned.relight_eval import evaluate_relight
+from learned.relighter import Relighter, match_exposure
 from learned.renderer_objectives import PHASE2_TERMS, downsample_masked
 from learned.train_renderer import RendererConfig, export_renderer, train_renderer
 from physrelight import image_model
@@ -230,7 +231,7 @@ def test_08_exported_weights_round_trip_and_plug_into_the_pipeline(tiny_dataset:
     # the pipeline uses it: "proposed" now differs from the ShadowNet + Lambertian fallback
     for f in ("inverse.safetensors", "shadow.safetensors", "lighting_prior.npz"):
         shutil.copy(frozen / f, tmp_path / "w" / f)
-    pipe = Pipeline.load(tmp_path / "w")
+    pipe = Relighter.load(tmp_path / "w")
     assert pipe.renderer is not None
     batch = PairSampler(tiny_dataset, split="all", res=24).batch(1, 0)
     image, sky = batch.image[:1], batch.sky[:1]
