@@ -23,7 +23,7 @@ import torch
 from safetensors.torch import load_file, save_file
 from safetensors import safe_open
 
-__all__ = ["export_weights", "latest_checkpoint", "load_checkpoint", "load_weights", "save_checkpoint"]
+__all__ = ["export_weights", "latest_checkpoint", "load_checkpoint", "load_weights", "resume", "save_checkpoint"]
 
 _NAME = re.compile(r"^step_(\d{7})\.json$")
 
@@ -144,3 +144,20 @@ def load_weights(path: str | Path) -> tuple[dict[str, torch.Tensor], dict[str, s
     with safe_open(str(path), framework="pt") as f:
         meta = dict(f.metadata() or {})
     return load_file(str(path)), meta
+
+
+def resume(run: str | Path, model: torch.nn.Module, optimizer: Optimizers, config: Any) -> tuple[int, float]:
+    """Load the latest checkpoint of ``run`` (if any) into ``model``/``optimizer`` and return
+    ``(step, train_seconds)`` to continue from (``(0, 0.0)`` for a fresh run).
+
+    ``config`` is the run's configuration dataclass: a checkpoint written under another
+    configuration (compared with ``config.identity()``, the fields a resume must keep) is refused.
+    """
+    side = latest_checkpoint(run)
+    if side is None:
+        return 0, 0.0
+    meta = load_checkpoint(side, model, optimizer)
+    saved = meta.get("config")
+    if saved and type(config)(**{**saved, "out": config.out}).identity() != config.identity():
+        raise ValueError(f"{str(run)!r} holds a run with another configuration; use another --out")
+    return int(meta["step"]), float(meta.get("train_seconds", 0.0))

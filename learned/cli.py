@@ -33,6 +33,14 @@ import json
 from physrelight.cli import positive_int
 
 
+def _write_json(path: str | None, data: dict) -> None:
+    """Write metrics to ``path`` (atomically; nothing when None)."""
+    if path:
+        from physrelight import io
+
+        io.write_json(path, data)
+
+
 def _config(args: argparse.Namespace, stage: str):
     from .objectives import LossWeights
     from .train import TrainConfig
@@ -82,13 +90,8 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     metrics = evaluate(decompose, args.data, args.split, r.res, r.prior, args.max_images,
                        shadow_fn=lambda out: r.shadow_net(out["normals"], out["lighting"]))
-    text = json.dumps(metrics, indent=1)
-    print(text)
-    if args.json:
-        from pathlib import Path
-
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(text + "\n")
+    print(json.dumps(metrics, indent=1))
+    _write_json(args.json, metrics)
     return 0
 
 
@@ -166,11 +169,8 @@ def _train_sky_stage(args: argparse.Namespace) -> int:
         else:
             metrics = evaluate_segmentation(model["seg"], args.evaluate, split="all", res=cfg.res,
                                             fit_root=cfg.data, fit_split=cfg.train_split)
-        text = json.dumps(metrics, indent=1)
-        print(text)
-        if args.json:
-            Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-            Path(args.json).write_text(text + "\n")
+        print(json.dumps(metrics, indent=1))
+        _write_json(args.json, metrics)
     return 0
 
 
@@ -266,11 +266,7 @@ def _evaluate_relight(args: argparse.Namespace) -> int:
     result = evaluate_relight(pipe.relight_linear, args.data, args.split, args.res, args.max_cases,
                               progress=not args.quiet)
     print(format_table(result))
-    if args.json:
-        from pathlib import Path
-
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
+    _write_json(args.json, result)
     return 0
 
 

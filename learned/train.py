@@ -272,13 +272,7 @@ def train(config: TrainConfig) -> dict[str, Any]:
             p.requires_grad_(False)
     opt = torch.optim.Adam(model.parameters(), lr=config.lr)
 
-    start, seconds = 0, 0.0
-    side = ckpt.latest_checkpoint(run)
-    if side is not None:
-        meta = ckpt.load_checkpoint(side, model, opt)
-        if meta["config"] and TrainConfig(**{**meta["config"], "out": config.out}).identity() != config.identity():
-            raise ValueError(f"{str(run)!r} holds a run with another configuration; use another --out")
-        start, seconds = int(meta["step"]), float(meta.get("train_seconds", 0.0))
+    start, seconds = ckpt.resume(run, model, opt, config)
     if start >= config.steps:
         if rank == 0:
             print(f"{run}: already at step {start} >= {config.steps}")

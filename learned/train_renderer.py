@@ -165,13 +165,7 @@ def train_renderer(config: RendererConfig) -> dict[str, Any]:
     opts = {"g": torch.optim.Adam(g.parameters(), lr=config.lr, betas=(0.5, 0.999)),
             "d": torch.optim.Adam(d.parameters(), lr=config.lr_d, betas=(0.5, 0.999))}
 
-    start, seconds = 0, 0.0
-    side = ckpt.latest_checkpoint(run)
-    if side is not None:
-        meta = ckpt.load_checkpoint(side, models, opts)
-        if RendererConfig(**{**meta["config"], "out": config.out}).identity() != config.identity():
-            raise ValueError(f"{str(run)!r} holds a run with another configuration; use another --out")
-        start, seconds = int(meta["step"]), float(meta.get("train_seconds", 0.0))
+    start, seconds = ckpt.resume(run, models, opts, config)
     if start >= config.steps:
         print(f"{run}: already at step {start} >= {config.steps}")
         return {"step": start, "train_seconds": seconds}

@@ -269,13 +269,7 @@ def train_sky(config: SkyTrainConfig) -> dict[str, Any]:
     else:
         opt = {"seg": torch.optim.Adam(model.parameters(), lr=config.lr)}
 
-    start, seconds = 0, 0.0
-    side = ckpt.latest_checkpoint(run)
-    if side is not None:
-        meta = ckpt.load_checkpoint(side, model, opt)
-        if SkyTrainConfig(**{**meta["config"], "out": config.out}).identity() != config.identity():
-            raise ValueError(f"{str(run)!r} holds a run with another configuration; use another --out")
-        start, seconds = int(meta["step"]), float(meta.get("train_seconds", 0.0))
+    start, seconds = ckpt.resume(run, model, opt, config)
     if start >= config.steps:
         print(f"{run}: already at step {start} >= {config.steps}")
         return {"step": start, "train_seconds": seconds}
