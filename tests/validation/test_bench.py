@@ -57,6 +57,25 @@ def test_01_quick_run_scores_every_method_without_nan_and_the_physics_ordering_h
     # Metrics agree with each other: DSSIM is (1 - SSIM) / 2.
     for x in m.values():
         assert x["dssim"] == pytest.approx((1 - x["ssim"]) / 2, abs=1e-9)
+    # `proposed` runs the shipped neural renderer: it no longer equals shadownet_lambertian.
+    from learned.lighting import WEIGHTS_DIR
+
+    shipped = (WEIGHTS_DIR / "renderer.safetensors").is_file()
+    assert r["renderer_weights"] is shipped
+    if shipped:
+        assert abs(m["proposed"]["l1"] - m["shadownet_lambertian"]["l1"]) > 1e-4
+    # proposed is far ahead of doing nothing (quick: 0.125 vs 0.182, better on all 4 scenes). Its lead
+    # over lambertian_sh (0.1250 vs 0.1270) is better on 19 of 28 pairs but only 1 of 4 scenes (scene
+    # means +0.0006 +- 0.0026): a coin flip, so it stays a reported verdict and is not asserted here.
+    assert m["proposed"]["l1"] < 0.85 * m["identity"]["l1"]
+    paired = r["verdicts"]["proposed_ordering"]["paired"]
+    cross = r["protocols"]["cross"]["pairs"]
+    for other, q in paired.items():
+        # The paired figures agree with the table: the mean difference is the difference of means.
+        assert q["mean_diff"] == pytest.approx(m["proposed"]["l1"] - m[other]["l1"], abs=1e-9), other
+        assert q["pairs"] == cross and 0 <= q["pairs_better"] <= cross and 0 <= q["scenes_better"] <= q["scenes"]
+        assert q["scenes"] >= 3 and math.isfinite(q["scene_se"]) and q["scene_se"] >= 0
+    assert paired["identity"]["scenes_better"] > paired["identity"]["scenes"] / 2
     # Analysis by synthesis ran on a small subset and is slow, as stated.
     a = m["mitsuba_analysis_by_synthesis"]
     assert a["photos"] == 2 and 2 <= a["pairs"] <= 6

@@ -27,6 +27,22 @@ LABELS = {"l1": "l1", "mse": "MSE", "ssim": "SSIM", "dssim": "DSSIM", "psnr": "P
 KIND_ORDER = ("sunsky", "evening", "overcast", "hdri")
 
 
+def _paired(a: "MethodRun", b: "MethodRun", pairs: list[Pair], idx: Sequence[int]) -> dict[str, Any]:
+    """Method ``a`` against ``b`` on the pairs ``idx``, l1: the mean difference ``a - b`` (negative:
+    ``a`` is better), the pairs and the scenes where ``a`` is better, and the standard error of the
+    mean over scenes (each scene's mean difference is one sample)."""
+    d = a.values["l1"][list(idx)] - b.values["l1"][list(idx)]
+    scenes: dict[str, list[float]] = {}
+    for i, x in zip(idx, d):
+        scenes.setdefault(pairs[i].view.scene, []).append(float(x))
+    per_scene = np.array([np.mean(v) for v in scenes.values()])
+    se = float(per_scene.std(ddof=1) / math.sqrt(len(per_scene))) if len(per_scene) > 1 else math.nan
+    return {"mean_diff": float(d.mean()) if len(d) else math.nan, "pairs": int(len(d)),
+            "pairs_better": int((d < 0).sum()), "scenes": int(len(per_scene)),
+            "scenes_better": int((per_scene < 0).sum()), "scene_mean_diff": float(per_scene.mean())
+            if len(per_scene) else math.nan, "scene_se": se}
+
+
 def _fmt(x: float, metric: str = "l1") -> str:
     if x is None or not math.isfinite(x):
         return "n/a"
@@ -107,12 +123,16 @@ def write_report(out_dir: str | Path, report: dict[str, Any], pairs: list[Pair],
         and all(np.all(np.isfinite(v)) for r in runs.values() for v in r.values.values())
     if abs_result is not None:
         finite_ok = finite_ok and abs_result["run"].nonfinite == 0 and not abs_result["run"].failures
+    # How sure the ordering is: per-pair differences are not independent (the pairs of one scene
+    # share its photo and decomposition), so the scene is the unit: its mean l1 difference.
+    paired = {other: _paired(runs["proposed"], runs[other], pairs, all_idx) for other in ("lambertian_sh", "identity")}
     verdicts = {
         "physics_ordering": {"passed": bool(physics_ok), "what": "oracle_sh_shadow l1 < oracle_sh l1 (all data)",
                              "values": [l1["oracle_sh_shadow"], l1["oracle_sh"]]},
         "proposed_ordering": {"passed": bool(proposed_ok),
                               "what": "proposed l1 < lambertian_sh l1 and proposed l1 < identity l1 (all data)",
-                              "values": [l1["proposed"], l1["lambertian_sh"], l1["identity"]]},
+                              "values": [l1["proposed"], l1["lambertian_sh"], l1["identity"]],
+                              "paired": paired},
         "finite": {"passed": bool(finite_ok), "what": "no failure and no NaN/inf output for any method on any pair"},
     }
     report.update(methods=methods, strata=strata_json, verdicts=verdicts,
@@ -189,7 +209,15 @@ def markdown(report: dict[str, Any], chart_paths: list[tuple[str, str]]) -> str:
         if x.get("values"):
             vals = " (" + ", ".join(_fmt(y) for y in x["values"]) + ")"
         lines.append(f"- **{label}: {'PASS' if x['passed'] else 'FAIL'}**: {x['what']}{vals}")
-    if not report.get("renderer_weights"):
+        for other, q in x.get("paired", {}).items():
+            lines.append(f"  - proposed - {other}: l1 {q['mean_diff']:+.4f} on average; proposed better on "
+                         f"{q['pairs_better']} of {q['pairs']} pairs and {q['scenes_better']} of {q['scenes']} scenes "
+                         f"(scene means {q['scene_mean_diff']:+.4f} +- {q['scene_se']:.4f} s.e.)")
+    if report.get("renderer_weights"):
+        lines.append("- `proposed` runs the shipped neural renderer (`learned/weights/renderer.safetensors`) on the "
+                     "decomposition and ShadowNet's target shadow; `shadownet_lambertian` is the same pipeline with "
+                     "the Lambertian image model in place of the renderer.")
+    else:
         lines.append("- No neural-renderer weights are shipped yet: `proposed` falls back to "
                      "`shadownet_lambertian` (identical numbers, see learned/relighter.py).")
     lines.append("")
@@ -263,7 +291,10 @@ def markdown(report: dict[str, Any], chart_paths: list[tuple[str, str]]) -> str:
               f"Seconds per image (median, {mach.get('torch_threads')} torch threads) against l1 on {sp['pairs']} "
               "cross-relighting pairs spread over the data. `proposed` is swept over working resolution (the photo "
               "resampled so its short side is the resolution, relit there, brought back by ratio transfer) and over "
-              "the inverse network's width (`runs/width_W`: the width chart's nets, trained 500 steps).", "",
+              "the inverse network's width (`runs/width_W`: the width chart's nets, trained 500 steps, swapped into the "
+              "otherwise unchanged pipeline: the shipped ShadowNet"
+              + (" and neural renderer, which were trained on the shipped inverse net's decompositions" if
+                 report.get("renderer_weights") else "") + ").", "",
               "| setting | working res | inverse width | l1 | s / image |", "| --- | ---: | ---: | ---: | ---: |"]
     for s in sp["sweep"]:
         lines.append(f"| proposed ({s['kind']}) | {s['res']} | {s['width']} | {_fmt(s['l1'])} | "
