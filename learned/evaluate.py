@@ -32,6 +32,7 @@ import torch.nn.functional as F
 
 from physrelight.lighting_prior import LightingPrior
 from synth.dataset import SynthDataset, to_chw
+from synth.photo import photo_gain
 
 from .data import load_photo
 
@@ -95,9 +96,7 @@ def load_ground_truth(ds: SynthDataset, scene: str, view: int, light: int, res: 
         shadow = F.interpolate(shadow[None], size=(res, res), mode="area")[0]
         direct = F.interpolate(direct[None], size=(res, res), mode="area")[0]
         normal = F.interpolate(normal[None], size=(res, res), mode="nearest")[0]
-    params = gt["photo_params"]
-    gain = 2.0 ** params["ev"] * np.asarray(params["wb_gains"], dtype=np.float64)
-    lighting = torch.from_numpy(gt["sh"]["2"] * gain[None, :])
+    lighting = torch.from_numpy(gt["sh"]["2"] * photo_gain(gt["photo_params"])[None, :])
     return {"albedo": albedo, "normal": normal, "shadow": shadow, "direct_shadow": direct, "lighting": lighting}
 
 

@@ -37,6 +37,7 @@ import torch.nn.functional as F
 
 from physrelight import colour, metrics
 from synth.dataset import SynthDataset, to_chw
+from synth.photo import photo_gain
 
 from .data import load_photo
 
@@ -58,17 +59,13 @@ def relight_cases(ds: SynthDataset) -> list[tuple[str, int, int, int]]:
     return out
 
 
-def _gain(params: dict) -> np.ndarray:
-    return 2.0 ** params["ev"] * np.asarray(params["wb_gains"], dtype=np.float64)
-
-
 def load_case(ds: SynthDataset, scene: str, view: int, a: int, b: int, res: int) -> dict[str, torch.Tensor]:
     """One case: source ``image (3, H, W)`` linear, ``sky``, ``fg`` ``(1, H, W)`` bool, ``target_ldr
     (3, H, W)``, ``target_sh`` / ``source_sh`` ``(9, 3)`` in the source photo's units."""
     photo = load_photo(ds, scene, view, a, res)
     src = ds.load(scene, view, a, keys=("photo_params", "sh", "normal"))
     dst = ds.load(scene, view, b, keys=("radiance", "sh"))
-    gain = _gain(src["photo_params"])
+    gain = photo_gain(src["photo_params"])
     radiance = to_chw((dst["radiance"] * gain[None, None, :]).astype(np.float32))
     normal = to_chw(src["normal"])
     if radiance.shape[-1] != res:

@@ -66,12 +66,25 @@ def sample_photo_params(rng: np.random.Generator, radiance: np.ndarray, jpeg_pro
                        noise_sigma=noise, jpeg_quality=quality)
 
 
+def photo_gain(params: PhotoParams | dict) -> np.ndarray:
+    """``(3,)`` ``2**ev * wb_gains``: radiance (and radiance SH) -> the photo's linear units.
+
+    ``params`` is a :class:`PhotoParams` or its JSON record (``photo_params`` in a dataset).
+    """
+    if isinstance(params, PhotoParams):
+        ev, gains = params.ev, params.wb_gains
+    else:
+        ev, gains = params["ev"], params["wb_gains"]
+    return (2.0 ** float(ev)) * np.asarray(gains, dtype=np.float64)
+
+
 def make_photo(radiance: np.ndarray, params: PhotoParams, rng: np.random.Generator) -> np.ndarray:
     """Render the LDR photo ``uint8 (H, W, 3)`` from linear radiance ``(H, W, 3)``."""
     if radiance.ndim != 3 or radiance.shape[-1] != 3:
         raise ValueError(f"radiance must have shape (H, W, 3), got {radiance.shape}")
     if not np.all(np.isfinite(radiance)):
         raise ValueError("radiance holds NaN or inf")
+    # Exposure then white balance, in this order: the same bytes as every dataset written so far.
     exposed = np.clip(radiance, 0, None) * (2.0**params.ev) * np.asarray(params.wb_gains)
     if params.noise_sigma > 0:
         exposed = np.clip(exposed + rng.normal(0.0, params.noise_sigma, size=exposed.shape), 0, None)

@@ -150,11 +150,6 @@ def sun_sh(sun_direction: Any, sun_irradiance: Any, world_to_camera: Any) -> np.
     return np.asarray(sh.rotation(R, 2)) @ world
 
 
-def photo_gain(params: dict[str, Any]) -> np.ndarray:
-    """``(3,)`` ``2**ev * wb_gains``: world radiance -> the photo's linear units."""
-    return (2.0 ** float(params["ev"])) * np.asarray(params["wb_gains"], dtype=np.float64)
-
-
 # ----------------------------------------------------------------------------- a synth folder
 
 

@@ -34,8 +34,9 @@ import numpy as np
 import torch
 
 from physrelight import colour
+from synth.photo import photo_gain
 
-from .data import BenchView, photo_gain
+from .data import BenchView
 
 VARIANTS = ("", "dark", "noise_jpeg")
 DARK_STOPS = 3.0
