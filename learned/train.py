@@ -44,13 +44,46 @@ from .lighting import load_prior
 from .networks import InverseNet, ShadowNet, count_parameters
 from .objectives import LossWeights, decompose_and_solve, inverse_losses
 
-__all__ = ["TrainConfig", "build_inverse", "load_inverse", "load_network", "load_shadow", "train"]
+__all__ = ["RESUME_FREE_FIELDS", "RunConfig", "TrainConfig", "build_inverse", "load_inverse", "load_network", "load_shadow", "train"]
 
 STAGES = ("inverse", "shadow")
 
 
+# Fields a resumed run may change: where it writes, how long it runs, how it reports.
+RESUME_FREE_FIELDS = frozenset({"out", "progress", "steps", "val_every", "val_images", "threads", "val_data",
+                                "val_split"})
+
+
+class RunConfig:
+    """What every training-run configuration dataclass shares (a mixin): the input checks
+    and the identity a resume must keep (:func:`learned.checkpoint.resume`)."""
+
+    def check_common(self, positive_ints: tuple[str, ...], positive_numbers: tuple[str, ...],
+                     known_weights: set[str] | dict[str, float]) -> None:
+        """Raise a ``ValueError`` naming the field unless every ``positive_ints`` field is a
+        positive int, every ``positive_numbers`` field a finite positive number, ``data`` a
+        dataset folder and every loss weight one of ``known_weights``."""
+        for name in positive_ints:
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        for name in positive_numbers:
+            v = getattr(self, name)
+            if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if not Path(self.data, "manifest.json").is_file():
+            raise ValueError(f"{self.data!r} is not a dataset folder (no manifest.json)")
+        unknown = set(self.weights) - set(known_weights)
+        if unknown:
+            raise ValueError(f"unknown loss weights {sorted(unknown)}; known: {sorted(known_weights)}")
+
+    def identity(self) -> dict[str, Any]:
+        """The fields that must agree for a resume (all but :data:`RESUME_FREE_FIELDS`)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in RESUME_FREE_FIELDS}
+
+
 @dataclass
-class TrainConfig:
+class TrainConfig(RunConfig):
     """Everything that determines a run (recorded in every checkpoint)."""
 
     stage: str
@@ -79,25 +112,10 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.stage not in STAGES:
             raise ValueError(f"stage must be one of {STAGES}, got {self.stage!r}")
-        for name in ("width", "depth", "res", "batch", "steps", "val_every", "val_images", "ckpt_every",
-                     "log_every", "threads"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        if not (math.isfinite(self.lr) and self.lr > 0):
-            raise ValueError(f"lr must be a positive number, got {self.lr!r}")
-        if not Path(self.data, "manifest.json").is_file():
-            raise ValueError(f"{self.data!r} is not a dataset folder (no manifest.json)")
+        self.check_common(("width", "depth", "res", "batch", "steps", "val_every", "val_images", "ckpt_every",
+                           "log_every", "threads"), ("lr",), LossWeights().as_dict())
         if self.stage == "shadow" and self.inverse is None:
             raise ValueError("the shadow stage needs --inverse (an inverse run folder or weights file)")
-        unknown = set(self.weights) - set(LossWeights().as_dict())
-        if unknown:
-            raise ValueError(f"unknown loss weights {sorted(unknown)}")
-
-    def identity(self) -> dict[str, Any]:
-        """The fields that must agree for a resume (not out/progress/steps/val/threads)."""
-        skip = {"out", "progress", "steps", "val_every", "val_images", "threads", "val_data", "val_split"}
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
 
 
 def build_inverse(width: int, depth: int, seed: int) -> InverseNet:

@@ -28,7 +28,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -49,13 +49,13 @@ from .objectives import decompose_and_solve
 from .relight_eval import evaluate_relight, load_case, relight_cases
 from .relighter import Relighter
 from .renderer_objectives import RendererWeights, discriminator_loss, renderer_losses
-from .train import _Logs, _ldr, load_inverse, load_shadow
+from .train import RunConfig, _Logs, _ldr, load_inverse, load_shadow
 
 __all__ = ["DecompositionCache", "RendererConfig", "export_renderer", "train_renderer"]
 
 
 @dataclass
-class RendererConfig:
+class RendererConfig(RunConfig):
     """Everything that determines a renderer run (recorded in every checkpoint)."""
 
     data: str
@@ -88,27 +88,11 @@ class RendererConfig:
     progress: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("width", "depth", "d_width", "res", "batch", "steps", "cross_scale", "val_every",
-                     "val_images", "ckpt_every", "log_every", "threads"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        self.check_common(("width", "depth", "d_width", "res", "batch", "steps", "cross_scale", "val_every",
+                           "val_images", "ckpt_every", "log_every", "threads"), ("lr", "lr_d"),
+                          RendererWeights().as_dict())
         if isinstance(self.phase1_steps, bool) or not isinstance(self.phase1_steps, int) or self.phase1_steps < 0:
             raise ValueError(f"phase1_steps must be a non-negative integer, got {self.phase1_steps!r}")
-        for name in ("lr", "lr_d"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a positive number, got {v!r}")
-        if not Path(self.data, "manifest.json").is_file():
-            raise ValueError(f"{self.data!r} is not a dataset folder (no manifest.json)")
-        unknown = set(self.weights) - set(RendererWeights().as_dict())
-        if unknown:
-            raise ValueError(f"unknown loss weights {sorted(unknown)}")
-
-    def identity(self) -> dict[str, Any]:
-        """The fields that must agree for a resume."""
-        skip = {"out", "progress", "steps", "val_every", "val_images", "threads", "val_data", "val_split"}
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
 
 
 class DecompositionCache:

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +38,7 @@ from torch import nn
 
 from physrelight import io
 from synth.dataset import SynthDataset, to_chw
+from synth.photo import photo_gain
 
 from . import checkpoint as ckpt
 from .data import load_photo
@@ -45,7 +46,7 @@ from .discriminators import MultiscaleDiscriminator, feature_matching_loss, lsga
 from .networks import count_parameters
 from .sky_gan import LOG_EPS, SkyGenerator, condition_map, generate_sky, lighting_scale
 from .sky_segmentation import SkySegmenter, photometric_augment, segment_sky
-from .train import _Logs, _ldr
+from .train import RunConfig, _Logs, _ldr
 
 __all__ = ["SkyTrainConfig", "SkyData", "evaluate_segmentation", "export_sky", "mirror_lighting",
            "sky_follows_lighting", "train_sky", "SKY_STAGES"]
@@ -57,7 +58,7 @@ _ODD_IN_X = [3, 4, 7]
 
 
 @dataclass
-class SkyTrainConfig:
+class SkyTrainConfig(RunConfig):
     """Everything that determines a SkyGAN or segmentation run (recorded in every checkpoint)."""
 
     stage: str
@@ -90,28 +91,12 @@ class SkyTrainConfig:
     def __post_init__(self) -> None:
         if self.stage not in SKY_STAGES:
             raise ValueError(f"stage must be one of {SKY_STAGES}, got {self.stage!r}")
-        for name in ("width", "depth", "res", "batch", "steps", "z_dim", "noise_channels", "hidden", "d_width",
-                     "val_every", "val_images", "ckpt_every", "log_every", "threads"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        self.check_common(("width", "depth", "res", "batch", "steps", "z_dim", "noise_channels", "hidden",
+                           "d_width", "val_every", "val_images", "ckpt_every", "log_every", "threads"),
+                          ("lr", "lr_d"), SKY_LOSS_WEIGHTS)
         if self.res < 8:
             raise ValueError(f"res must be >= 8, got {self.res}")
-        for name in ("lr", "lr_d"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a positive number, got {v!r}")
-        if not Path(self.data, "manifest.json").is_file():
-            raise ValueError(f"{self.data!r} is not a dataset folder (no manifest.json)")
-        unknown = set(self.weights) - set(SKY_LOSS_WEIGHTS)
-        if unknown:
-            raise ValueError(f"unknown loss weights {sorted(unknown)}; known: {sorted(SKY_LOSS_WEIGHTS)}")
         self.weights = {**SKY_LOSS_WEIGHTS, **self.weights}
-
-    def identity(self) -> dict[str, Any]:
-        """The fields that must agree for a resume."""
-        skip = {"out", "progress", "steps", "val_every", "val_images", "threads", "val_data", "val_split"}
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
 
 
 # ------------------------------------------------------------------------- data
@@ -122,11 +107,6 @@ def mirror_lighting(lighting: torch.Tensor) -> torch.Tensor:
     out = lighting.clone()
     out[..., _ODD_IN_X, :] = -out[..., _ODD_IN_X, :]
     return out
-
-
-def _gain(params: dict) -> np.ndarray:
-    """``2**ev * wb_gains``: radiance / SH -> the photo's linear units."""
-    return 2.0 ** params["ev"] * np.asarray(params["wb_gains"], dtype=np.float64)
 
 
 class SkyData:
@@ -162,7 +142,7 @@ class SkyData:
             skies.append(p["sky"])
             if lighting:
                 gt = ds.load(it.scene, it.view, it.light, keys=("sh", "photo_params"))
-                lights.append(torch.from_numpy(gt["sh"]["2"] * _gain(gt["photo_params"])[None, :]).float())
+                lights.append(torch.from_numpy(gt["sh"]["2"] * photo_gain(gt["photo_params"])[None, :]).float())
             else:
                 lights.append(torch.zeros(9, 3))
         self.image, self.sky, self.lighting = torch.stack(images), torch.stack(skies), torch.stack(lights)
@@ -510,7 +490,7 @@ def sky_follows_lighting(generator: SkyGenerator, root: str | Path, split: str =
         lb = (it.light + 1) % ds.num_lights(it.scene)
         gt_a = ds.load(it.scene, it.view, it.light, keys=("radiance", "sh", "photo_params"))
         gt_b = ds.load(it.scene, it.view, lb, keys=("radiance", "sh"))
-        gain = _gain(gt_a["photo_params"])
+        gain = photo_gain(gt_a["photo_params"])
         rad = []
         for g in (gt_a, gt_b):
             r = to_chw(g["radiance"] * gain[None, None, :].astype(np.float32))
