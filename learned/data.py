@@ -26,7 +26,7 @@ import torch.nn.functional as F
 from physrelight import camera, colour
 from synth.dataset import SynthDataset, to_chw
 
-__all__ = ["Batch", "PairSampler", "load_photo", "resize_view"]
+__all__ = ["Batch", "PairSampler", "load_photo", "resize_short_side", "resize_view"]
 
 
 @dataclass
@@ -57,6 +57,19 @@ class Batch:
         """Rows reordered so row i holds the other photo of row i's pair (``[b; a]``)."""
         n = self.pairs
         return torch.cat([x[n:], x[:n]], 0)
+
+
+def resize_short_side(x: torch.Tensor, res: int) -> torch.Tensor:
+    """Resize ``x (B, C, H, W)`` so its short side is ``res``, aspect ratio kept (long side
+    rounded): area averaging when shrinking, bilinear when enlarging; ``x`` itself if the size holds."""
+    h, w = x.shape[-2:]
+    k = res / min(h, w)
+    size = (max(1, round(h * k)), max(1, round(w * k)))
+    if size == (h, w):
+        return x
+    if k < 1:
+        return F.interpolate(x, size=size, mode="area")
+    return F.interpolate(x, size=size, mode="bilinear", align_corners=False)
 
 
 def resize_view(image: torch.Tensor, depth: torch.Tensor, sky: torch.Tensor, K: torch.Tensor,

@@ -268,6 +268,29 @@ class Relighter:
         return {"relit": relit, "target": tgt, "target_shadow": s, **{k: out[k] for k in (
             "albedo", "normals", "shadow", "lighting", "foreground")}}
 
+    @torch.no_grad()
+    def relight_full_resolution(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
+                                source_lighting: torch.Tensor | None = None, method: str = "proposed",
+                                working_res: int | None = None) -> dict[str, Any]:
+        """:meth:`relight_linear` at a working resolution, brought back to the image's size.
+
+        The image is resized so its short side is ``working_res`` (None: the networks' ``res``;
+        :func:`working_resolution`), relit there, and brought back by ratio transfer
+        (:func:`transfer_to_full_resolution`), so detail finer than the working resolution survives.
+
+        Args:
+            image: ``(B, 3, H, W)`` linear; sky ``(B, 1, H, W)`` bool; target, source_lighting,
+                method: as for :meth:`relight_linear`.
+
+        Returns:
+            ``relit`` ``(B, 3, H, W)`` linear at full size (sky pixels = ``image``), ``working``
+            (:meth:`relight_linear`'s dict at the working resolution) and ``working_sky``.
+        """
+        small, small_sky = working_resolution(image, sky, self.res if working_res is None else working_res)
+        out = self.relight_linear(small, small_sky, target, source_lighting=source_lighting, method=method)
+        relit = torch.where(sky, image, transfer_to_full_resolution(image, small, out["relit"]))
+        return {"relit": relit, "working": out, "working_sky": small_sky}
+
     def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
                 method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
                 seed: int = 0) -> Any:
@@ -278,7 +301,7 @@ class Relighter:
         """
         lin, kind = _as_image(image)
         layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky, new_sky,
-                                       seed)
+                                       seed, layers=False)
         return _give_back(layers["relit"], kind)
 
     def relight_layers(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
@@ -321,16 +344,16 @@ class Relighter:
         return {k: v[0].permute(1, 2, 0).numpy() for k, v in layers.items()}
 
     def _relight_tensors(self, lin: torch.Tensor, target: Any, world_to_camera: Any, sky_mask: Any, method: str,
-                         azimuth_deg: float, sky_type: str, new_sky: bool = True,
-                         seed: int = 0) -> dict[str, torch.Tensor]:
+                         azimuth_deg: float, sky_type: str, new_sky: bool = True, seed: int = 0,
+                         layers: bool = True) -> dict[str, torch.Tensor]:
+        """The relit photo (``"relit"``) and, with ``layers``, every layer at full resolution."""
         sky = self.sky_mask(lin, sky_mask)
         if not math.isfinite(float(azimuth_deg)):
             raise ValueError(f"azimuth must be a finite number of degrees, got {azimuth_deg!r}")
         target_cam = self.target_lighting(rotate_azimuth(target, azimuth_deg) if azimuth_deg else target,
                                           world_to_camera, sky_type).float()
-        small, small_sky = working_resolution(lin, sky, self.res)
-        out = self.relight_linear(small, small_sky, target_cam, method=method)
-        relit = torch.where(sky, lin, transfer_to_full_resolution(lin, small, out["relit"]))
+        full = self.relight_full_resolution(lin, sky, target_cam, method=method)
+        relit, out, small_sky = full["relit"], full["working"], full["working_sky"]
         size = lin.shape[-2:]
 
         def up(x: torch.Tensor) -> torch.Tensor:
@@ -344,10 +367,13 @@ class Relighter:
             painted = generate_sky(self.sky_generator, out["relit"], small_sky, out["target"], seed=seed)
             relit = torch.where(sky, up(painted), relit)
 
-        shading = image_model.shading(out["normals"], out["target"])
         with torch.no_grad():
+            result = {"relit": colour.to_ldr(relit.clamp_min(0))}
+            if not layers:  # relight() and sequences need only the photo: skip the full-size layers
+                return result
+            shading = image_model.shading(out["normals"], out["target"])
             return {
-                "relit": colour.to_ldr(relit.clamp_min(0)),
+                **result,
                 "albedo": colour.to_ldr(up(out["albedo"]).clamp(0, 1)),
                 "normals": (0.5 * up(out["normals"]) + 0.5).clamp(0, 1),
                 "shadow": up(out["shadow"]).clamp(0, 1),
@@ -445,17 +471,13 @@ def rotate_azimuth(target: Any, degrees: float) -> Any:
 
 def working_resolution(image: torch.Tensor, sky: torch.Tensor, res: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Resize ``image (B, 3, H, W)`` and ``sky (B, 1, H, W)`` so the short side is ``res``
-    (area averaging when shrinking; the sky mask by majority of the area), long side rounded."""
-    h, w = image.shape[-2:]
-    k = res / min(h, w)
-    size = (max(1, round(h * k)), max(1, round(w * k)))
-    if size == (h, w):
+    (:func:`learned.data.resize_short_side`; the sky mask by majority of the area), long side rounded."""
+    from .data import resize_short_side
+
+    small = resize_short_side(image, res)
+    if small is image:
         return image, sky
-    mode = "area" if k < 1 else "bilinear"
-    kw = {} if mode == "area" else {"align_corners": False}
-    small = torch.nn.functional.interpolate(image, size=size, mode=mode, **kw)
-    small_sky = torch.nn.functional.interpolate(sky.float(), size=size, mode=mode, **kw) > 0.5
-    return small, small_sky
+    return small, resize_short_side(sky.float(), res) > 0.5
 
 
 def transfer_to_full_resolution(full: torch.Tensor, small: torch.Tensor, relit_small: torch.Tensor,

@@ -24,6 +24,7 @@ from torch import nn
 from physrelight import colour
 
 from . import checkpoint as ckpt
+from .data import resize_short_side
 from .networks import UNet
 
 __all__ = ["SkySegmenter", "load_sky_segmenter", "photometric_augment", "segment_sky", "sky_probability"]
@@ -64,25 +65,15 @@ class SkySegmenter(nn.Module):
         return self.unet(x - lum.mean(dim=(2, 3), keepdim=True))
 
 
-def _working_size(h: int, w: int, res: int) -> tuple[int, int]:
-    """Short side ``res``, aspect ratio kept."""
-    s = res / min(h, w)
-    return max(1, round(h * s)), max(1, round(w * s))
-
-
 def sky_probability(model: SkySegmenter, image: torch.Tensor) -> torch.Tensor:
     """``(B, 3, H, W)`` linear, any size -> sky probability ``(B, 1, H, W)``, computed at the model's resolution."""
     _check_image(image)
     h, w = image.shape[-2:]
-    size = _working_size(h, w, model.res)
     param = next(model.parameters())
-    x = image.to(param.dtype)
-    if size != (h, w):
-        down = size[0] < h
-        x = F.interpolate(x, size=size, mode="area" if down else "bilinear", align_corners=None if down else False)
+    x = resize_short_side(image.to(param.dtype), model.res)
     with torch.no_grad():
         p = torch.sigmoid(model(x))
-    if size != (h, w):
+    if p.shape[-2:] != (h, w):
         p = F.interpolate(p, size=(h, w), mode="bilinear", align_corners=False)
     return p.to(image.dtype)
 

@@ -81,7 +81,6 @@ def _real_photo() -> np.ndarray | None:
 def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: Callable[[str], None] = print) -> dict:
     """Run the pipeline demo; write the panel and metrics into ``out_dir``; return the metrics."""
     from learned import Relighter
-    from learned.relighter import transfer_to_full_resolution, working_resolution
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -96,7 +95,6 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
     sky = torch.from_numpy(sc["sky"])[None, None]
     fg = torch.from_numpy(sc["foreground"])[None, None].float()
     relighter = Relighter.load()
-    small, small_sky = working_resolution(lin, sky, relighter.res)
 
     log("[2/3] relighting with the shipped weights, compared with path tracing")
     results: dict = {"seed": seed, "size": size, "spp": spp, "source": names[0], "targets": {}}
@@ -107,9 +105,9 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
         seconds = {"identity": 0.0}
         for method in ("proposed", "lambertian_sh"):
             t = time.perf_counter()
-            r = relighter.relight_linear(small, small_sky, torch.from_numpy(sc["lights"][name]["sh"] * gain).float(),
-                                         source_lighting=torch.from_numpy(src["sh"] * gain).float(), method=method)
-            relit = torch.where(sky, lin, transfer_to_full_resolution(lin, small, r["relit"]))
+            relit = relighter.relight_full_resolution(
+                lin, sky, torch.from_numpy(sc["lights"][name]["sh"] * gain).float(),
+                source_lighting=torch.from_numpy(src["sh"] * gain).float(), method=method)["relit"]
             preds[method] = colour.to_ldr(relit.clamp_min(0))
             seconds[method] = time.perf_counter() - t
         entry = {}

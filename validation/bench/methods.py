@@ -98,8 +98,8 @@ class Learned:
         relighter: a loaded :class:`learned.Relighter`.
         method: ``"proposed"``, ``"lambertian_sh"`` or ``"shadownet_lambertian"``.
         res: working resolution: the photo is resampled so its short side is ``res``
-            (:func:`learned.relighter.working_resolution`), relit there, and brought back by
-            ratio transfer (:func:`learned.relighter.transfer_to_full_resolution`); None = as given.
+            (short side), relit there, and brought back by ratio transfer
+            (:meth:`learned.Relighter.relight_full_resolution`); None = as given.
         name: the name reported (default ``method``).
     """
 
@@ -110,14 +110,11 @@ class Learned:
         self.name = name or method
 
     def __call__(self, pair: Pair) -> torch.Tensor:
-        from learned.relighter import transfer_to_full_resolution, working_resolution
-
-        image, sky = pair.image(), pair.sky()
-        small, small_sky = (image, sky) if self.res is None else working_resolution(image, sky, self.res)
-        out = self.relighter.relight_linear(small, small_sky, pair.target_lighting(),
-                                            source_lighting=pair.source_lighting(), method=self.method)
-        relit = transfer_to_full_resolution(image, small, out["relit"])
-        return torch.where(sky, image, relit)
+        image = pair.image()
+        res = min(image.shape[-2:]) if self.res is None else self.res  # the short side as is = no resampling
+        return self.relighter.relight_full_resolution(image, pair.sky(), pair.target_lighting(),
+                                                      source_lighting=pair.source_lighting(), method=self.method,
+                                                      working_res=res)["relit"]
 
 
 @dataclass
