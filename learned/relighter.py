@@ -139,10 +139,11 @@ class Relighter:
         rpath = Path(renderer) if renderer is not None else d / "renderer.safetensors"
         if renderer is not None and not rpath.is_file():
             raise FileNotFoundError(f"no renderer weights at {str(rpath)!r}")
+        neural = None
         if rpath.is_file():
             from .neural_renderer import load_renderer
 
-            renderer = load_renderer(rpath)
+            neural = load_renderer(rpath)
         if (d / "sky_segmentation.safetensors").is_file():
             from .sky_segmentation import load_sky_segmenter
 
@@ -151,7 +152,7 @@ class Relighter:
             from .sky_gan import load_sky_generator
 
             generator = load_sky_generator(d / "sky_gan.safetensors")
-        return cls(inverse, shadow, load_prior(d / "lighting_prior.npz"), int(inv_m.get("res", 64)), renderer,
+        return cls(inverse, shadow, load_prior(d / "lighting_prior.npz"), int(inv_m.get("res", 64)), neural,
                    segmenter, generator)
 
     @torch.no_grad()
