@@ -116,20 +116,29 @@ def load_checkpoint(sidecar: str | Path, model: torch.nn.Module | None = None,
     return meta
 
 
-def export_weights(sidecar: str | Path, dest: str | Path, kind: str) -> Path:
+def export_weights(sidecar: str | Path, dest: str | Path, kind: str, submodule: str | None = None,
+                   strip_submodule: bool = True, extra: dict[str, str] | None = None) -> Path:
     """Write the model tensors of a checkpoint to ``dest`` (safetensors, weights only).
 
-    The metadata records ``kind`` ("inverse" or "shadow"), ``width``, ``depth``, ``res``,
-    ``step`` and the training seconds, so :func:`load_weights` rebuilds the network.
+    The metadata records ``kind`` (e.g. "inverse", "shadow", "renderer"), ``width``,
+    ``depth``, ``res``, ``step``, the training seconds, the configuration and ``extra``, so
+    the matching loader rebuilds the network.
+
+    Args:
+        submodule: export only this child of the checkpointed ``ModuleDict`` (e.g. ``"g"``,
+            a GAN's generator: the discriminator is for training only); None = the whole model.
+        strip_submodule: drop the ``"<submodule>."`` prefix from the tensor names.
     """
     sidecar = Path(sidecar)
     meta = json.loads(sidecar.read_text())
-    tensors = {k[6:]: v for k, v in load_file(str(sidecar.with_suffix(".safetensors"))).items()
-               if k.startswith("model.")}
+    head = "model." if submodule is None else f"model.{submodule}."
+    cut = len(head) if strip_submodule else len("model.")
+    tensors = {k[cut:]: v for k, v in load_file(str(sidecar.with_suffix(".safetensors"))).items()
+               if k.startswith(head)}
     cfg = meta["config"]
     info = {"kind": kind, "width": str(cfg["width"]), "depth": str(cfg["depth"]), "res": str(cfg["res"]),
             "step": str(meta["step"]), "train_seconds": f"{meta.get('train_seconds', 0.0):.1f}",
-            "config": json.dumps(cfg, sort_keys=True)}
+            "config": json.dumps(cfg, sort_keys=True), **(extra or {})}
     dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
     _atomic_save_tensors(tensors, dest, metadata=info)

@@ -34,7 +34,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from safetensors.torch import load_file
 from torch import nn
 
 from physrelight import io
@@ -247,13 +246,5 @@ def export_renderer(sidecar: str | Path, dest: str | Path) -> Path:
     cfg = meta["config"]
     if "phase1_steps" not in cfg:
         raise ValueError(f"{str(sidecar)!r} is not a renderer checkpoint")
-    tensors = {k[len("model.g."):]: v for k, v in load_file(str(sidecar.with_suffix(".safetensors"))).items()
-               if k.startswith("model.g.")}
-    info = {"kind": "renderer", "width": str(cfg["width"]), "depth": str(cfg["depth"]), "res": str(cfg["res"]),
-            "additive": "1" if cfg.get("additive", True) else "0",
-            "step": str(meta["step"]), "train_seconds": f"{meta.get('train_seconds', 0.0):.1f}",
-            "config": json.dumps(cfg, sort_keys=True)}
-    dest = Path(dest)
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    ckpt._atomic_save_tensors(tensors, dest, metadata=info)
-    return dest
+    return ckpt.export_weights(sidecar, dest, "renderer", submodule="g",
+                               extra={"additive": "1" if cfg.get("additive", True) else "0"})

@@ -25,7 +25,6 @@ sky's overall brightness, colour and gradient; the GAN terms supply the texture)
 from __future__ import annotations
 
 import math
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -389,15 +388,7 @@ def export_sky(run: str | Path, dest: str | Path) -> Path:
         return ckpt.export_weights(side, dest, "sky_segmentation")
     if cfg.get("stage") != "sky":
         raise ValueError(f"{str(run)!r} is not a sky or segmentation run")
-    model = build_sky_model(SkyTrainConfig(**cfg))
-    ckpt.load_checkpoint(side, model, restore_rng=False)
-    gen_only = nn.ModuleDict({"g": model["g"]})
-    with tempfile.TemporaryDirectory() as tmp:
-        # A generator-only checkpoint, exported through the checkpoint module's own API.
-        opt = torch.optim.Adam(gen_only.parameters())
-        tmp_side = ckpt.save_checkpoint(tmp, int(meta["step"]), gen_only, opt,
-                                        {"config": cfg, "train_seconds": meta.get("train_seconds", 0.0)})
-        return ckpt.export_weights(tmp_side, dest, "sky_gan")
+    return ckpt.export_weights(side, dest, "sky_gan", submodule="g", strip_submodule=False)
 
 
 # ------------------------------------------------------------------------- held-out measurements
