@@ -389,7 +389,7 @@ RELIGHT_METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian")
 
 def dc_luminance(lighting: torch.Tensor) -> torch.Tensor:
     """``(B, 9, 3)`` radiance SH -> ``(B,)`` luminance of the DC term (the lighting's overall level)."""
-    lum = torch.tensor([0.2126, 0.7152, 0.0722], dtype=lighting.dtype)
+    lum = torch.tensor(colour.LUMINANCE, dtype=lighting.dtype)
     return (lighting[:, 0] * lum).sum(-1)
 
 

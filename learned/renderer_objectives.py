@@ -210,7 +210,7 @@ def renderer_losses(renderer: NeuralRenderer, discriminator: MultiscaleDiscrimin
 def _shading_luminance(lighting: torch.Tensor, normals: torch.Tensor) -> torch.Tensor:
     """``(B, 1, H, W)`` luminance of ``shading(normals; lighting)``, clamped at 0."""
     shading = image_model.shading(normals, lighting)
-    lum = torch.tensor([0.2126, 0.7152, 0.0722], dtype=shading.dtype)[None, :, None, None]
+    lum = torch.tensor(colour.LUMINANCE, dtype=shading.dtype)[None, :, None, None]
     return (shading * lum).sum(1, keepdim=True).clamp_min(0.0)
 
 

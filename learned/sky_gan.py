@@ -35,13 +35,15 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from physrelight import colour
+
 from . import checkpoint as ckpt
 
 __all__ = ["SkyGenerator", "condition_map", "generate_sky", "lighting_scale", "load_sky_generator",
            "sky_noise", "COND_CHANNELS"]
 
 Y00 = 0.282095
-LUMA = (0.2126, 0.7152, 0.0722)
+LUMA = colour.LUMINANCE
 COND_CHANNELS = 1 + 3 + 2 + 27
 LOG_EPS = 0.01
 

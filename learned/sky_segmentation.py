@@ -29,7 +29,7 @@ from .networks import UNet
 
 __all__ = ["SkySegmenter", "load_sky_segmenter", "photometric_augment", "segment_sky", "sky_probability"]
 
-_LUMA = (0.2126, 0.7152, 0.0722)
+_LUMA = colour.LUMINANCE
 
 
 def _check_image(image: torch.Tensor, name: str = "image") -> None:

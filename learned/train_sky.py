@@ -35,7 +35,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from physrelight import io
+from physrelight import colour, io
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import photo_gain
 
@@ -399,7 +399,7 @@ def _sky_stats(image: torch.Tensor, sky: torch.Tensor) -> np.ndarray:
     log luminance along y (up) and x (right), image coordinates in [-1, 1] (least squares over
     sky pixels; NaN when the sky spans fewer than 2 rows/columns)."""
     out = []
-    luma = image.new_tensor((0.2126, 0.7152, 0.0722)).reshape(3, 1, 1)
+    luma = image.new_tensor(colour.LUMINANCE).reshape(3, 1, 1)
     for x, m in zip(image.double(), sky):
         m = m[0]
         h, w = m.shape
@@ -436,7 +436,7 @@ def _sh_features(lighting: torch.Tensor) -> np.ndarray:
     """``(N, 9, 3)`` -> ``(N, 4)`` SH-only predictors of the four sky statistics: log of the DC
     mean radiance ``s``, log(L00 blue / L00 red), and the luminance of the y (Y1-1) and x (Y11)
     terms over the DC's (light from above / from the right)."""
-    luma = lighting.new_tensor((0.2126, 0.7152, 0.0722))
+    luma = lighting.new_tensor(colour.LUMINANCE)
     lum = (lighting.double() * luma.double()).sum(-1)
     l00 = lighting[:, 0].double().clamp_min(1e-12)
     return torch.stack([torch.log(lighting_scale(lighting).flatten().double()), torch.log(l00[:, 2] / l00[:, 0]),
@@ -552,7 +552,7 @@ def _top_rows(image: torch.Tensor, k: int) -> torch.Tensor:
 
 def _brightness(image: torch.Tensor) -> torch.Tensor:
     """Luminance over the image's 99th percentile luminance ``(B, 1, H, W)``."""
-    lum = (image * image.new_tensor((0.2126, 0.7152, 0.0722)).reshape(1, 3, 1, 1)).sum(1, keepdim=True)
+    lum = (image * image.new_tensor(colour.LUMINANCE).reshape(1, 3, 1, 1)).sum(1, keepdim=True)
     q = torch.quantile(lum.flatten(1), 0.99, dim=1).reshape(-1, 1, 1, 1).clamp_min(1e-6)
     return lum / q
 

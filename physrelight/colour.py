@@ -40,6 +40,7 @@ from physrelight._checks import (
 )
 
 __all__ = [
+    "LUMINANCE",
     "RESPONSE_CURVES",
     "M_RGB_TO_XYZ",
     "M_XYZ_TO_RGB",
@@ -63,6 +64,8 @@ __all__ = [
 
 # ----------------------------------------------------------------------------- constants
 
+#: Luminance weights of linear sRGB / Rec. 709 primaries: the Y row of :data:`M_RGB_TO_XYZ`.
+LUMINANCE = (0.2126, 0.7152, 0.0722)
 #: Linear sRGB (D65) -> CIE XYZ, exactly ``colour.RGB_COLOURSPACES['sRGB'].matrix_RGB_to_XYZ``.
 M_RGB_TO_XYZ = np.array(
     [

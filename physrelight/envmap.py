@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from physrelight import io
+from physrelight import colour, io
 from physrelight._checks import (
     Array,
     check_finite,
@@ -38,7 +38,7 @@ from physrelight._checks import (
     to_tensor,
 )
 
-LUMINANCE = (0.2126, 0.7152, 0.0722)
+LUMINANCE = colour.LUMINANCE
 """Rec. 709 / linear sRGB luminance weights."""
 
 # DWA compression leaves small negative ringing around bright texels (seen down to

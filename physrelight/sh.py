@@ -458,7 +458,7 @@ def order_errors(env: Array, orders: Sequence[int] = (0, 1, 2, 3, 4), normals: A
     n = torch.from_numpy(fibonacci_sphere(512)) if normals is None else to_tensor(normals, "normals")[0].to(torch.float64)
     check_last_dim(n, 3, "normals", "(N, 3)")
     ref = _envmap.irradiance_reference(e, n) if reference is None else to_tensor(reference, "reference")[0].to(torch.float64)
-    lum = torch.tensor([0.2126, 0.7152, 0.0722], dtype=torch.float64)
+    lum = torch.tensor(_envmap.LUMINANCE, dtype=torch.float64)
     ref_y = ref @ lum
     total = float((_envmap.luminance_integral(e)))
     floor = 1e-3 * float(ref_y.mean().clamp_min(1e-30))

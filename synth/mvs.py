@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from physrelight import colour
+
 
 @dataclass(frozen=True)
 class MVSParams:
@@ -73,7 +75,7 @@ def degrade_depth(depth: np.ndarray, albedo: np.ndarray, rng: np.random.Generato
         thin = valid & ~opened
 
     # Textureless regions lose depth in blobs.
-    lum = albedo @ np.asarray([0.2126, 0.7152, 0.0722])
+    lum = albedo @ np.asarray(colour.LUMINANCE)
     mean = ndimage.uniform_filter(lum, 5)
     std = np.sqrt(np.maximum(ndimage.uniform_filter(lum**2, 5) - mean**2, 0.0))
     blobs = _smooth_noise(rng, depth.shape, max(depth.shape) / 16) > _gauss_quantile(1 - params.textureless_drop)

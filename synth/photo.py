@@ -49,7 +49,7 @@ def metered_ev(radiance: np.ndarray, key: float = 0.18) -> float:
     A camera meters the whole frame, sky included; the log average keeps the sun's
     specular glints from dominating.
     """
-    y = radiance @ np.asarray([0.2126, 0.7152, 0.0722])
+    y = radiance @ np.asarray(colour.LUMINANCE)
     log_avg = math.exp(float(np.mean(np.log(np.maximum(y, 1e-6)))))
     return math.log2(key / max(log_avg, 1e-12))
 

@@ -19,7 +19,9 @@ from typing import Any
 
 import numpy as np
 
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+from physrelight import colour
+
+LUMINANCE = np.asarray(colour.LUMINANCE)
 """Rec. 709 luminance weights (z-tests run on luminance: R, G, B of a pixel share their paths)."""
 
 

@@ -40,7 +40,7 @@ import torch
 from physrelight import image_model, sh
 
 from . import charts
-from .common import CheckResult, Context
+from .common import LUMINANCE, CheckResult, Context
 from .scenes import BankView
 from .renderer_irradiance import lighting_yardstick
 from .shadow_loss import chw, exact_shading
@@ -89,7 +89,7 @@ def ridge_bound(A: np.ndarray, L: np.ndarray, ridge: float = 1e-8) -> float:
 def observable(A: np.ndarray, rtol: float = 1e-3) -> np.ndarray:
     """``(9, 9)`` projector onto the lighting directions a view constrains: right singular
     vectors of the luminance design with singular value above ``rtol`` of the largest."""
-    lum = np.tensordot(np.array([0.2126, 0.7152, 0.0722]), A, axes=1)
+    lum = np.tensordot(LUMINANCE, A, axes=1)
     _, sv, vt = np.linalg.svd(lum, full_matrices=False)
     keep = vt[sv > rtol * sv[0]]
     return keep.T @ keep

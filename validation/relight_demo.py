@@ -46,7 +46,7 @@ def _scene(seed: int, size: int, spp: int, log: Callable[[str], None]) -> dict:
     forest = lighting.hdri(HDRI_DIR / "forest.exr", azimuth_deg=120.0)
     # The HDRI is in its own units: scale it to the source's DC luminance (the same overall
     # light level), so the target photographed at the source's exposure is not blown out.
-    lum = np.array([0.2126, 0.7152, 0.0722])
+    lum = np.asarray(colour.LUMINANCE)
     k = float(source.sh(2)[0] @ lum) / float(forest.sh(2)[0] @ lum)
     lights = {
         "clear sky, sun 45 deg (source)": source,

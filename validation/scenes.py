@@ -33,7 +33,7 @@ from synth import render as _render
 from synth.backend import load_mitsuba
 from synth.scene import Material, Part, SceneSpec, generate_scene
 
-from .common import Level
+from .common import LUMINANCE, Level
 
 mi = load_mitsuba()
 
@@ -236,8 +236,8 @@ def sun_share(light: _lighting.Lighting) -> float:
     if not light.has_sun:
         return 0.0
     up = np.array([[0.0, 1.0, 0.0]])
-    total = float(light.irradiance_reference(up)[0] @ [0.2126, 0.7152, 0.0722])
-    sun = max(0.0, float(light.sun_direction[1])) * float(light.sun_irradiance @ [0.2126, 0.7152, 0.0722])
+    total = float(light.irradiance_reference(up)[0] @ LUMINANCE)
+    sun = max(0.0, float(light.sun_direction[1])) * float(light.sun_irradiance @ LUMINANCE)
     return sun / total if total > 0 else 0.0
 
 
@@ -245,7 +245,7 @@ def total_power(light: _lighting.Lighting) -> float:
     """``int Y(L) dw`` over the sphere, sun included (the scale of the SH error bounds)."""
     from physrelight import envmap
 
-    sun = float(light.sun_irradiance @ [0.2126, 0.7152, 0.0722]) if light.has_sun else 0.0
+    sun = float(light.sun_irradiance @ LUMINANCE) if light.has_sun else 0.0
     return envmap.luminance_integral(light.sky.astype(np.float64)) + sun
 
 

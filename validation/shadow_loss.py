@@ -39,7 +39,7 @@ import torch
 from physrelight import image_model, losses
 
 from . import charts
-from .common import CheckResult, Context
+from .common import LUMINANCE, CheckResult, Context
 from .scenes import BankView
 
 SHADOW_PRECISION = 0.1
@@ -131,8 +131,7 @@ def evaluate_view(v: BankView) -> dict[str, Any]:
     f["umbra_pixels"] = int(umbra.sum())
     f["umbra_cost_per_pixel"] = float(pp[umbra].mean()) if umbra.any() else float("nan")
     f["lit_cost_per_pixel"] = float(pp[lit].mean()) if lit.any() else float("nan")
-    lum = np.array([0.2126, 0.7152, 0.0722])
-    share = 1.0 - (direct @ lum) / np.maximum(full @ lum, 1e-12)
+    share = 1.0 - (direct @ LUMINANCE) / np.maximum(full @ LUMINANCE, 1e-12)
     f["interreflection_share_p99"] = float(np.percentile(share[m], 99))
     f["interreflection_share_mean"] = float(share[m].mean())
     # Verdict pixels: shadowed and measured; direct render, exact shading.

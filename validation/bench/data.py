@@ -28,8 +28,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-
+from ..common import LUMINANCE
 
 # ----------------------------------------------------------------------------- records
 

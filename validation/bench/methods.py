@@ -34,6 +34,7 @@ import torch
 
 from physrelight import image_model
 
+from ..common import LUMINANCE
 from .protocols import Pair
 
 LEARNED = ("proposed", "lambertian_sh", "shadownet_lambertian")
@@ -192,8 +193,7 @@ class AnalysisBySynthesis:
                                 sky=fitted.inputs["sky"].numpy().astype(np.float32),
                                 sun_direction=given.sun_direction, sun_irradiance=np.clip(sun, 0, None),
                                 sun_radius_deg=given.sun_radius_deg)
-        lum = np.array([0.2126, 0.7152, 0.0722])
-        scale = float(fitted_light.sh(2)[0] @ lum) / max(float(given.sh(2)[0] @ lum), 1e-12)
+        scale = float(fitted_light.sh(2)[0] @ LUMINANCE) / max(float(given.sh(2)[0] @ LUMINANCE), 1e-12)
         self._fits[key] = (fitted, scale)
         return fitted, scale
 
