@@ -33,6 +33,17 @@ import json
 from physrelight.cli import positive_int
 
 
+def _loss_weights(items: list[str] | None, defaults: dict[str, float]) -> dict[str, float]:
+    """``defaults`` with the ``--loss-weight NAME=VALUE`` overrides applied (unknown names refused)."""
+    weights = dict(defaults)
+    for item in items or []:
+        name, _, value = item.partition("=")
+        if name not in weights:
+            raise ValueError(f"unknown loss weight {name!r}; known: {sorted(weights)}")
+        weights[name] = float(value)
+    return weights
+
+
 def _write_json(path: str | None, data: dict) -> None:
     """Write metrics to ``path`` (atomically; nothing when None)."""
     if path:
@@ -45,12 +56,7 @@ def _config(args: argparse.Namespace, stage: str):
     from .objectives import LossWeights
     from .train import TrainConfig
 
-    weights = LossWeights().as_dict()
-    for item in args.loss_weight or []:
-        name, _, value = item.partition("=")
-        if name not in weights:
-            raise ValueError(f"unknown loss weight {name!r}; known: {sorted(weights)}")
-        weights[name] = float(value)
+    weights = _loss_weights(args.loss_weight, LossWeights().as_dict())
     return TrainConfig(stage=stage, data=args.data, out=args.out, val_data=args.val_data, val_split=args.val_split,
                        train_split=args.train_split,
                        width=args.width, depth=args.depth, res=args.res, batch=args.batch, steps=args.steps,
@@ -140,12 +146,7 @@ def _train_sky_stage(args: argparse.Namespace) -> int:
 
     from .train_sky import SKY_LOSS_WEIGHTS, SkyTrainConfig, export_sky, train_sky
 
-    weights = dict(SKY_LOSS_WEIGHTS)
-    for item in args.loss_weight or []:
-        name, _, value = item.partition("=")
-        if name not in weights:
-            raise ValueError(f"unknown loss weight {name!r}; known: {sorted(weights)}")
-        weights[name] = float(value)
+    weights = _loss_weights(args.loss_weight, SKY_LOSS_WEIGHTS)
     cfg = SkyTrainConfig(stage=args.stage, data=args.data, out=args.out, val_data=args.val_data,
                          val_split=args.val_split, train_split=args.train_split, width=args.width, depth=args.depth,
                          res=args.res, batch=args.batch, steps=args.steps, lr=args.lr, lr_d=args.lr_d, seed=args.seed,
@@ -216,12 +217,7 @@ def _train_renderer(args: argparse.Namespace) -> int:
     from .renderer_objectives import RendererWeights
     from .train_renderer import RendererConfig, train_renderer
 
-    weights = RendererWeights().as_dict()
-    for item in args.loss_weight or []:
-        name, _, value = item.partition("=")
-        if name not in weights:
-            raise ValueError(f"unknown loss weight {name!r}; known: {sorted(weights)}")
-        weights[name] = float(value)
+    weights = _loss_weights(args.loss_weight, RendererWeights().as_dict())
     cfg = RendererConfig(data=args.data, out=args.out, inverse=args.inverse, shadow=args.shadow, prior=args.prior,
                          val_data=args.val_data, val_split=args.val_split, train_split=args.train_split,
                          width=args.width, depth=args.depth, d_width=args.d_width, res=args.res, batch=args.batch,

@@ -47,18 +47,10 @@ def _handler(args: argparse.Namespace) -> int:
     return 0 if v["finite"]["passed"] else 1
 
 
-def _threads(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {n}")
-    return n
-
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``bench`` on the ``physrelight`` subcommand parser."""
+    from physrelight.cli import positive_int
+
     p = sub.add_parser("bench", help="relighting benchmark: methods x protocols x strata, speed vs accuracy",
                        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_mutually_exclusive_group()
@@ -68,7 +60,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="a synth dataset folder (physrelight synth); --quick uses its first 2 scenes, --full all "
                         "(default: --quick renders its own, --full reads data/heldout)")
     p.add_argument("-o", "--output", default="out/bench", help="report folder (default: out/bench)")
-    p.add_argument("--threads", type=_threads, default=2, help="torch threads while timing (default 2)")
+    p.add_argument("--threads", type=positive_int, default=2, help="torch threads while timing (default 2)")
     p.add_argument("--runs", default="runs", metavar="DIR",
                    help="where the width sweep finds runs/width_4, width_8, width_16 (default: runs)")
     p.add_argument("--no-abs", action="store_true", help="skip the (slow) analysis-by-synthesis baseline")
