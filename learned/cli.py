@@ -62,8 +62,8 @@ def _config(args: argparse.Namespace, stage: str):
                        width=args.width, depth=args.depth, res=args.res, batch=args.batch, steps=args.steps,
                        lr=args.lr, seed=args.seed, val_every=args.val_every, val_images=args.val_images,
                        ckpt_every=args.ckpt_every, log_every=args.log_every, threads=args.threads,
-                       prior=args.prior, inverse=getattr(args, "inverse", None), weights=weights,
-                       progress=not args.quiet)
+                       prior=args.prior, inverse=getattr(args, "inverse", None), init=args.init,
+                       weights=weights, progress=not args.quiet)
 
 
 def _train_inverse(args: argparse.Namespace) -> int:
@@ -135,6 +135,9 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--log-every", type=positive_int, default=10)
     p.add_argument("--threads", type=positive_int, default=2, help="torch CPU threads per process (default: 2)")
     p.add_argument("--prior", default=None, help="lighting prior .npz (default: the shipped one)")
+    p.add_argument("--init", default=None, metavar="RUN_OR_WEIGHTS",
+                   help="start from this run's latest checkpoint or exported weights of the same stage and "
+                        "size (fine-tuning: a fresh optimizer; default: random initialisation)")
     p.add_argument("--loss-weight", action="append", metavar="NAME=VALUE",
                    help="override a loss weight (appearance, albedo, normal, cross, prior, shadow)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

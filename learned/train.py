@@ -106,6 +106,7 @@ class TrainConfig(RunConfig):
     threads: int = 2
     prior: str | None = None
     inverse: str | None = None
+    init: str | None = None
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
 
@@ -116,6 +117,8 @@ class TrainConfig(RunConfig):
                            "log_every", "threads"), ("lr",), LossWeights().as_dict())
         if self.stage == "shadow" and self.inverse is None:
             raise ValueError("the shadow stage needs --inverse (an inverse run folder or weights file)")
+        if self.init is not None and not Path(self.init).exists():
+            raise ValueError(f"init {self.init!r} does not exist (a {self.stage} run folder or weights file)")
 
 
 def build_inverse(width: int, depth: int, seed: int) -> InverseNet:
@@ -267,6 +270,17 @@ def write_panel(path: Path, image: torch.Tensor, out: dict[str, torch.Tensor], r
 # ------------------------------------------------------------------------- the loop
 
 
+def _warm_start(model: torch.nn.Module, config: TrainConfig) -> None:
+    """Copy the weights of ``config.init`` (same stage, width and depth) into ``model``."""
+    src = load_network(config.init, config.stage)
+    theirs, ours = src.state_dict(), model.state_dict()
+    bad = [k for k in ours if k not in theirs or theirs[k].shape != ours[k].shape]
+    if bad or set(theirs) != set(ours):
+        raise ValueError(f"init {config.init!r} does not match a {config.stage} network of width {config.width} "
+                         f"and depth {config.depth} (mismatched: {sorted(bad or set(theirs) ^ set(ours))[:3]})")
+    model.load_state_dict(theirs)
+
+
 def train(config: TrainConfig) -> dict[str, Any]:
     """Run (or resume) a training run; return the last validation metrics and timings."""
     torch.set_num_threads(config.threads)
@@ -288,8 +302,11 @@ def train(config: TrainConfig) -> dict[str, Any]:
         teacher = load_inverse(config.inverse)
         for p in teacher.parameters():
             p.requires_grad_(False)
+    if config.init is not None:
+        _warm_start(model, config)
     opt = torch.optim.Adam(model.parameters(), lr=config.lr)
 
+    # A checkpoint of this run, if any, replaces the warm start (resume to the same numbers).
     start, seconds = ckpt.resume(run, model, opt, config)
     if start >= config.steps:
         if rank == 0:

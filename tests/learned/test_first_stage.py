@@ -234,3 +234,22 @@ def test_09_the_shipped_weights_load_without_arguments() -> None:
     assert total < 8e6  # a few MB
     out = r.decompose(np.full((32, 32, 3), 128, np.uint8))
     assert np.isfinite(out["lighting"]).all()
+
+
+def test_10_init_warm_starts_from_another_run_and_refuses_a_mismatched_network(tiny_dataset: Path,
+                                                                               tiny_prior: Path, tmp_path: Path) -> None:
+    train(config(tiny_dataset, tmp_path / "base", tiny_prior, steps=3, ckpt_every=3))
+    train(config(tiny_dataset, tmp_path / "tuned", tiny_prior, steps=1, ckpt_every=1, init=str(tmp_path / "base")))
+    from safetensors.torch import load_file
+
+    base = load_file(str(tmp_path / "base" / "checkpoints" / "step_0000003.safetensors"))
+    tuned = load_file(str(tmp_path / "tuned" / "checkpoints" / "step_0000001.safetensors"))
+    params = [k for k in base if k.startswith("model.") and base[k].is_floating_point()]
+    assert params
+    # One Adam step moves a parameter by at most ~lr (3e-3); a fresh initialisation differs by far more.
+    worst = max(float((tuned[k] - base[k]).abs().max()) for k in params)
+    assert worst < 3.1e-3, worst
+    with pytest.raises(ValueError, match="does not match"):
+        train(config(tiny_dataset, tmp_path / "wide", tiny_prior, steps=1, width=8, init=str(tmp_path / "base")))
+    with pytest.raises(ValueError, match="does not exist"):
+        config(tiny_dataset, tmp_path / "x", tiny_prior, init=str(tmp_path / "missing"))
