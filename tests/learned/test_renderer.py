@@ -244,3 +244,9 @@ def test_08_exported_weights_round_trip_and_plug_into_the_pipeline(tiny_dataset:
     assert result["cases"] >= 1 and result["identity"]["l1"] > 0
     for m in ("proposed", "lambertian_sh", "shadownet_lambertian", "identity"):
         assert 0 <= result[m]["l1"] <= 1 and -1 <= result[m]["ssim"] <= 1, m
+    # The paired comparison: proposed minus each method, its mean equal to the difference of means.
+    for m in ("lambertian_sh", "shadownet_lambertian", "identity"):
+        for k in ("l1", "ssim", "psnr", "ciede2000"):
+            p = result["paired"][m][k]
+            assert p["diff"] == pytest.approx(result["proposed"][k] - result[m][k], abs=1e-4), (m, k)  # float32 scores
+            assert p["lo"] <= p["diff"] <= p["hi"]
