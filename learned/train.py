@@ -229,12 +229,25 @@ class _Logs:
             return
         path = self.run / name
         header = ["step", *values.keys()]
+        if path.is_file():
+            with path.open(newline="") as f:
+                reader = csv.DictReader(f)
+                rows, old = list(reader), list(reader.fieldnames or [])
+            if old != header:
+                # Metrics gained or lost a column (e.g. a run resumed under newer code): rewrite the
+                # file under the union of columns so that no row lands under the wrong heading.
+                header = old + [k for k in header if k not in old]
+                with io.atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
+                    w = csv.DictWriter(f, fieldnames=header, restval="")
+                    w.writeheader()
+                    w.writerows(rows)
         new = not path.is_file()
+        row = {"step": step, **{k: f"{v:.8g}" for k, v in values.items()}}
         with path.open("a", newline="") as f:
-            w = csv.writer(f)
+            w = csv.DictWriter(f, fieldnames=header, restval="")
             if new:
-                w.writerow(header)
-            w.writerow([step, *(f"{v:.8g}" for v in values.values())])
+                w.writeheader()
+            w.writerow(row)
         if self.tb is not None:
             group = name.split(".")[0]
             for k, v in values.items():

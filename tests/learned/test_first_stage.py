@@ -253,3 +253,17 @@ def test_10_init_warm_starts_from_another_run_and_refuses_a_mismatched_network(t
         train(config(tiny_dataset, tmp_path / "wide", tiny_prior, steps=1, width=8, init=str(tmp_path / "base")))
     with pytest.raises(ValueError, match="does not exist"):
         config(tiny_dataset, tmp_path / "x", tiny_prior, init=str(tmp_path / "missing"))
+
+
+def test_11_a_log_whose_metrics_gain_a_column_keeps_every_value_under_its_heading(tmp_path: Path) -> None:
+    from learned.train import _Logs
+
+    logs = _Logs(tmp_path, 0, True)
+    logs.write("val.csv", 1, {"a": 1.0, "b": 2.0})
+    logs.write("val.csv", 2, {"a": 3.0, "c": 4.0, "b": 5.0})  # a new metric, in another order
+    logs.write("val.csv", 3, {"a": 6.0, "b": 7.0, "c": 8.0})
+    logs.close()
+    got = rows(tmp_path / "val.csv")
+    assert list(got[0]) == ["step", "a", "b", "c"]
+    assert got == [{"step": "1", "a": "1", "b": "2", "c": ""}, {"step": "2", "a": "3", "b": "5", "c": "4"},
+                   {"step": "3", "a": "6", "b": "7", "c": "8"}]
