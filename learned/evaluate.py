@@ -7,7 +7,10 @@ Metrics, each next to a trivial baseline:
   scale is ambiguous from one photo), then the MSE; mean over images.
   Baseline: the linearised photo as albedo.
 * **normal MAE**: mean angular error in degrees over foreground pixels (mean per image,
-  then over images). Baseline: the camera-facing constant ``(0, 0, 1)``.
+  then over images). Baseline: the camera-facing constant ``(0, 0, 1)``. Where it fails:
+  the median over all foreground pixels, and the MAE split by whether the MVS-like depth
+  gives a normal there (the pixels the normal loss supervises) or not (per image, then
+  over the images that have such pixels).
 * **shadow AP**: average precision of ``1 - s`` for detecting shadowed pixels
   (ground-truth ``s < 0.5``), pooled over all foreground pixels. Baseline: no shadow
   (a constant score), whose AP is the fraction of shadowed pixels (chance).
@@ -34,6 +37,8 @@ from physrelight.lighting_prior import LightingPrior
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import photo_gain
 
+from physrelight import camera
+
 from .data import load_photo
 
 __all__ = ["average_precision", "evaluate", "load_ground_truth", "normal_angle_deg", "si_mse"]
@@ -49,11 +54,15 @@ def si_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> floa
     return float(((alpha * p - g) ** 2).mean())
 
 
+def _angles_deg(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> np.ndarray:
+    cos = (F.normalize(pred.double(), dim=0) * F.normalize(target.double(), dim=0)).sum(0, keepdim=True)
+    return torch.rad2deg(torch.acos(cos.clamp(-1.0, 1.0)))[mask].numpy()
+
+
 def normal_angle_deg(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
     """Mean angle in degrees between ``(3, H, W)`` unit normals over ``mask (1, H, W)``."""
-    cos = (F.normalize(pred.double(), dim=0) * F.normalize(target.double(), dim=0)).sum(0, keepdim=True)
-    ang = torch.rad2deg(torch.acos(cos.clamp(-1.0, 1.0)))[mask]
-    if ang.numel() == 0:
+    ang = _angles_deg(pred, target, mask)
+    if ang.size == 0:
         raise ValueError("normal_angle_deg: empty mask")
     return float(ang.mean())
 
@@ -117,7 +126,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
             reported as ``shadownet_ap``.
 
     Returns:
-        Flat dict: ``albedo_si_mse``, ``normal_mae_deg``, ``shadow_ap`` (labels: sun visibility
+        Flat dict: ``albedo_si_mse``, ``normal_mae_deg`` (and ``normal_median_deg``,
+        ``normal_mae_deg_mvs`` / ``normal_mae_deg_no_mvs``), ``shadow_ap`` (labels: sun visibility
         < 0.5), ``shadow_ap_direct`` (labels: direct-light ratio < 0.5),
         ``lighting_rel_err``, ``lighting_si_rel_err``, the same with ``baseline_``
         prefixed, ``shadow_positive_rate``, ``images``.
@@ -133,6 +143,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
     acc: dict[str, list[float]] = {k: [] for k in (
         "albedo_si_mse", "normal_mae_deg", "lighting_rel_err", "lighting_si_rel_err", "baseline_albedo_si_mse",
         "baseline_normal_mae_deg", "baseline_lighting_rel_err", "baseline_lighting_si_rel_err")}
+    acc["normal_mae_deg_mvs"], acc["normal_mae_deg_no_mvs"] = [], []
+    angles: list[np.ndarray] = []
     scores, scores_sn, labels, labels_direct = [], [], [], []
     for start in range(0, len(items), batch_size):
         chunk = items[start:start + batch_size]
@@ -150,6 +162,11 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
             acc["albedo_si_mse"].append(si_mse(out["albedo"][j], gt["albedo"], fg))
             acc["baseline_albedo_si_mse"].append(si_mse(image[j], gt["albedo"], fg))
             acc["normal_mae_deg"].append(normal_angle_deg(out["normals"][j], gt["normal"], fg))
+            _, mvs = camera.normals_from_depth(photos[j]["depth"][None], photos[j]["K"][None], max_rel_jump=0.1)
+            for key, where in (("normal_mae_deg_mvs", fg & mvs[0]), ("normal_mae_deg_no_mvs", fg & ~mvs[0])):
+                if bool(where.any()):
+                    acc[key].append(normal_angle_deg(out["normals"][j], gt["normal"], where))
+            angles.append(_angles_deg(out["normals"][j], gt["normal"], fg))
             flat = torch.zeros_like(gt["normal"])
             flat[2] = 1.0
             acc["baseline_normal_mae_deg"].append(normal_angle_deg(flat, gt["normal"], fg))
@@ -175,5 +192,6 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
     if scores_sn:
         res_["shadownet_ap"] = average_precision(np.concatenate(scores_sn), y)
         res_["shadownet_ap_direct"] = average_precision(np.concatenate(scores_sn), yd)
+    res_["normal_median_deg"] = float(np.median(np.concatenate(angles)))
     res_["images"] = float(len(acc["albedo_si_mse"]))
     return res_
