@@ -9,8 +9,9 @@ Metrics, each next to a trivial baseline:
 * **normal MAE**: mean angular error in degrees over foreground pixels (mean per image,
   then over images). Baseline: the camera-facing constant ``(0, 0, 1)``. Where it fails:
   the median over all foreground pixels, and the MAE split by whether the MVS-like depth
-  gives a normal there (the pixels the normal loss supervises) or not (per image, then
-  over the images that have such pixels).
+  gives a normal there (the pixels the normal loss supervises) or not, and by whether the
+  true surface faces up (within 10 deg of the world's +Y: ground, tops) or not (per image,
+  then over the images that have such pixels).
 * **shadow AP**: average precision of ``1 - s`` for detecting shadowed pixels
   (ground-truth ``s < 0.5``), pooled over all foreground pixels. Baseline: no shadow
   (a constant score), whose AP is the fraction of shadowed pixels (chance).
@@ -127,7 +128,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
 
     Returns:
         Flat dict: ``albedo_si_mse``, ``normal_mae_deg`` (and ``normal_median_deg``,
-        ``normal_mae_deg_mvs`` / ``normal_mae_deg_no_mvs``), ``shadow_ap`` (labels: sun visibility
+        ``normal_mae_deg_mvs`` / ``_no_mvs``, ``normal_mae_deg_up`` / ``_not_up``), ``shadow_ap`` (labels: sun visibility
         < 0.5), ``shadow_ap_direct`` (labels: direct-light ratio < 0.5),
         ``lighting_rel_err``, ``lighting_si_rel_err``, the same with ``baseline_``
         prefixed, ``shadow_positive_rate``, ``images``.
@@ -143,7 +144,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
     acc: dict[str, list[float]] = {k: [] for k in (
         "albedo_si_mse", "normal_mae_deg", "lighting_rel_err", "lighting_si_rel_err", "baseline_albedo_si_mse",
         "baseline_normal_mae_deg", "baseline_lighting_rel_err", "baseline_lighting_si_rel_err")}
-    acc["normal_mae_deg_mvs"], acc["normal_mae_deg_no_mvs"] = [], []
+    for key in ("normal_mae_deg_mvs", "normal_mae_deg_no_mvs", "normal_mae_deg_up", "normal_mae_deg_not_up"):
+        acc[key] = []
     angles: list[np.ndarray] = []
     scores, scores_sn, labels, labels_direct = [], [], [], []
     for start in range(0, len(items), batch_size):
@@ -163,7 +165,13 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
             acc["baseline_albedo_si_mse"].append(si_mse(image[j], gt["albedo"], fg))
             acc["normal_mae_deg"].append(normal_angle_deg(out["normals"][j], gt["normal"], fg))
             _, mvs = camera.normals_from_depth(photos[j]["depth"][None], photos[j]["K"][None], max_rel_jump=0.1)
-            for key, where in (("normal_mae_deg_mvs", fg & mvs[0]), ("normal_mae_deg_no_mvs", fg & ~mvs[0])):
+            # Upward-facing surfaces (true normal within 10 deg of the world's +Y): ground and
+            # tops, the easy part; everything else: walls, risers, statues.
+            up = photos[j]["world_to_camera"][:3, 1].double()  # world +Y in the camera frame
+            facing_up = (F.normalize(gt["normal"].double(), dim=0) * up[:, None, None]).sum(0, keepdim=True) \
+                > math.cos(math.radians(10.0))
+            for key, where in (("normal_mae_deg_mvs", fg & mvs[0]), ("normal_mae_deg_no_mvs", fg & ~mvs[0]),
+                               ("normal_mae_deg_up", fg & facing_up), ("normal_mae_deg_not_up", fg & ~facing_up)):
                 if bool(where.any()):
                     acc[key].append(normal_angle_deg(out["normals"][j], gt["normal"], where))
             angles.append(_angles_deg(out["normals"][j], gt["normal"], fg))
