@@ -19,6 +19,14 @@ Metrics, each next to a trivial baseline:
   camera-frame SH in the photo's units (true SH times ``2**ev`` times the white-balance
   gains of the photo), raw and scale-invariant (``L`` scaled by its optimal scalar, since
   albedo and lighting trade a global scale). Baseline: the prior's mean lighting.
+* **lighting shading error**: what the lighting does to this photo: the scale-invariant
+  relative error of ``shading(n; L)`` against ``shading(n; L_gt)`` on the photo's true
+  foreground normals. The coefficient error above also counts directions no pixel of the
+  photo faces, which no solve can see (a solve with the *true* albedo, normals and shadow is
+  further from ``L_gt`` in coefficients than the prior's mean); this one does not. Baseline:
+  the prior's mean; reference (``oracle_``): the pipeline's own solve and projection
+  (:func:`learned.objectives.solve_projected`) fed the true albedo, normals and sun visibility,
+  i.e. the best a perfect network could get from this lighting step.
 
 Ground truth is read with ``SynthDataset(mode="full")``; photos go through the same
 linearisation as in training.
@@ -38,11 +46,12 @@ from physrelight.lighting_prior import LightingPrior
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import photo_gain
 
-from physrelight import camera
+from physrelight import camera, image_model
 
 from .data import load_photo
+from .objectives import solve_projected
 
-__all__ = ["average_precision", "evaluate", "load_ground_truth", "normal_angle_deg", "si_mse"]
+__all__ = ["average_precision", "evaluate", "load_ground_truth", "normal_angle_deg", "shading_error", "si_mse"]
 
 
 def si_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
@@ -88,6 +97,18 @@ def average_precision(scores: np.ndarray, labels: np.ndarray) -> float:
     return float(np.sum(np.diff(np.r_[0.0, recall]) * precision))
 
 
+def shading_error(lighting: torch.Tensor, target: torch.Tensor, normals: torch.Tensor, mask: torch.Tensor) -> float:
+    """Scale-invariant relative error of ``shading(n; lighting)`` vs ``shading(n; target)``
+    (both ``(9, 3)``) over the unit ``normals (3, H, W)`` where ``mask (1, H, W)``."""
+    n = F.normalize(normals.double(), dim=0)[:, mask[0]][None, :, :, None]  # (1, 3, P, 1)
+    if n.shape[2] == 0:
+        raise ValueError("shading_error: empty mask")
+    a = image_model.shading(n, lighting.double()[None]).reshape(-1)
+    b = image_model.shading(n, target.double()[None]).reshape(-1)
+    alpha = float((a @ b) / (a @ a).clamp_min(1e-30))
+    return float((alpha * a - b).norm() / b.norm().clamp_min(1e-30))
+
+
 def _lighting_errors(pred: torch.Tensor, gt: torch.Tensor) -> tuple[float, float]:
     p, g = pred.double().reshape(-1), gt.double().reshape(-1)
     raw = float((p - g).norm() / g.norm())
@@ -130,7 +151,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         Flat dict: ``albedo_si_mse``, ``normal_mae_deg`` (and ``normal_median_deg``,
         ``normal_mae_deg_mvs`` / ``_no_mvs``, ``normal_mae_deg_up`` / ``_not_up``), ``shadow_ap`` (labels: sun visibility
         < 0.5), ``shadow_ap_direct`` (labels: direct-light ratio < 0.5),
-        ``lighting_rel_err``, ``lighting_si_rel_err``, the same with ``baseline_``
+        ``lighting_rel_err``, ``lighting_si_rel_err``, ``lighting_shading_err`` (and
+        ``oracle_lighting_shading_err``), the same with ``baseline_``
         prefixed, ``shadow_positive_rate``, ``images``.
     """
     ds = SynthDataset(root, split=split, mode="full")
@@ -144,7 +166,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
     acc: dict[str, list[float]] = {k: [] for k in (
         "albedo_si_mse", "normal_mae_deg", "lighting_rel_err", "lighting_si_rel_err", "baseline_albedo_si_mse",
         "baseline_normal_mae_deg", "baseline_lighting_rel_err", "baseline_lighting_si_rel_err")}
-    for key in ("normal_mae_deg_mvs", "normal_mae_deg_no_mvs", "normal_mae_deg_up", "normal_mae_deg_not_up"):
+    for key in ("normal_mae_deg_mvs", "normal_mae_deg_no_mvs", "normal_mae_deg_up", "normal_mae_deg_not_up",
+                "lighting_shading_err", "baseline_lighting_shading_err", "oracle_lighting_shading_err"):
         acc[key] = []
     angles: list[np.ndarray] = []
     scores, scores_sn, labels, labels_direct = [], [], [], []
@@ -182,6 +205,10 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                 raw, si = _lighting_errors(light, gt["lighting"])
                 acc[f"{name}lighting_rel_err"].append(raw)
                 acc[f"{name}lighting_si_rel_err"].append(si)
+            _, oracle = solve_projected(image[j:j + 1], gt["albedo"][None], gt["normal"][None], gt["shadow"][None],
+                                        fg[None].to(image.dtype), prior)
+            for name, light in (("", out["lighting"][j]), ("baseline_", mean_light), ("oracle_", oracle[0])):
+                acc[f"{name}lighting_shading_err"].append(shading_error(light, gt["lighting"], gt["normal"], fg))
             labels.append((gt["shadow"][fg] < 0.5).numpy())
             labels_direct.append((gt["direct_shadow"][fg] < 0.5).numpy())
             scores.append((1.0 - out["shadow"][j][fg]).numpy())

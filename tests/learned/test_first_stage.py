@@ -133,7 +133,7 @@ def test_05_a_tiny_self_supervised_run_lowers_the_loss(tiny_dataset: Path, tiny_
     assert len(total) == 40 and np.all(np.isfinite(total))
     assert total[-10:].mean() < 0.7 * total[:10].mean()
     for key in ("albedo_si_mse", "normal_mae_deg", "normal_median_deg", "shadow_ap", "lighting_rel_err",
-                "baseline_albedo_si_mse"):
+                "lighting_shading_err", "oracle_lighting_shading_err", "baseline_albedo_si_mse"):
         assert np.isfinite(result["val"][key]), key
     assert (tmp_path / "run" / "panels" / "step_0000040.png").is_file()
     assert list((tmp_path / "run" / "tb").iterdir())  # TensorBoard events
@@ -268,3 +268,31 @@ def test_11_a_log_whose_metrics_gain_a_column_keeps_every_value_under_its_headin
     assert list(got[0]) == ["step", "a", "b", "c"]
     assert got == [{"step": "1", "a": "1", "b": "2", "c": ""}, {"step": "2", "a": "3", "b": "5", "c": "4"},
                    {"step": "3", "a": "6", "b": "7", "c": "8"}]
+
+
+def test_12_the_lighting_shading_error_sees_only_what_the_photo_faces() -> None:
+    from learned.evaluate import shading_error
+
+    rng = np.random.default_rng(0)
+    L = torch.from_numpy(rng.normal(size=(9, 3))) + torch.tensor([3.0, 3.0, 3.0])  # a positive DC term
+    up = torch.zeros(3, 8, 8, dtype=torch.float64)
+    up[2] = 1.0  # every pixel faces the camera (+z)
+    mask = torch.ones(1, 8, 8, dtype=torch.bool)
+    assert shading_error(L, L, up, mask) == pytest.approx(0.0, abs=1e-12)
+    assert shading_error(2.5 * L, L, up, mask) == pytest.approx(0.0, abs=1e-12)  # scale-free
+    # Index l(l+1)+m: 1 is Y_1,-1 (~ y), 4 is Y_2,-2 (~ xy); both vanish at n = +z, so changing
+    # them changes nothing this photo shows, however far the coefficients move.
+    unseen = L.clone()
+    unseen[1] += 5.0
+    unseen[4] -= 5.0
+    assert shading_error(unseen, L, up, mask) == pytest.approx(0.0, abs=1e-9)
+    # Y_1,0 (~ z) changes the shading these pixels see; with a single normal that is only a
+    # scale, so half the pixels get another normal and the change must show.
+    seen = L.clone()
+    seen[2] += 1.0
+    tilted = up.clone()
+    tilted[0, :, :4] = 0.6
+    tilted[2, :, :4] = 0.8
+    assert shading_error(seen, L, tilted, mask) > 1e-3
+    with pytest.raises(ValueError, match="empty mask"):
+        shading_error(L, L, up, torch.zeros(1, 8, 8, dtype=torch.bool))
