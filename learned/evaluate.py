@@ -5,7 +5,10 @@ Metrics, each next to a trivial baseline:
 * **albedo si-MSE**: per image, the prediction is scaled by the least-squares scalar
   ``alpha = <p, g> / <p, p>`` over foreground pixels and channels (the albedo/lighting
   scale is ambiguous from one photo), then the MSE; mean over images.
-  Baseline: the linearised photo as albedo.
+  Baseline: the linearised photo as albedo. Reference (``oracle_albedo_si_mse``): the photo
+  divided by its true shading and true direct-light ratio, ``i / (s shading(n; L))`` clipped to
+  [0, 1]: what the image model itself allows, given a perfect decomposition of everything else
+  (clipping, noise, JPEG, interreflections and the order-2 truncation remain).
 * **normal MAE**: mean angular error in degrees over foreground pixels (mean per image,
   then over images). Baseline: the camera-facing constant ``(0, 0, 1)``. Where it fails:
   the median over all foreground pixels, and the MAE split by whether the MVS-like depth
@@ -152,7 +155,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         ``normal_mae_deg_mvs`` / ``_no_mvs``, ``normal_mae_deg_up`` / ``_not_up``), ``shadow_ap`` (labels: sun visibility
         < 0.5), ``shadow_ap_direct`` (labels: direct-light ratio < 0.5),
         ``lighting_rel_err``, ``lighting_si_rel_err``, ``lighting_shading_err`` (and
-        ``oracle_lighting_shading_err``), the same with ``baseline_``
+        ``oracle_lighting_shading_err``), ``oracle_albedo_si_mse``, the same with ``baseline_``
         prefixed, ``shadow_positive_rate``, ``images``.
     """
     ds = SynthDataset(root, split=split, mode="full")
@@ -167,7 +170,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         "albedo_si_mse", "normal_mae_deg", "lighting_rel_err", "lighting_si_rel_err", "baseline_albedo_si_mse",
         "baseline_normal_mae_deg", "baseline_lighting_rel_err", "baseline_lighting_si_rel_err")}
     for key in ("normal_mae_deg_mvs", "normal_mae_deg_no_mvs", "normal_mae_deg_up", "normal_mae_deg_not_up",
-                "lighting_shading_err", "baseline_lighting_shading_err", "oracle_lighting_shading_err"):
+                "lighting_shading_err", "baseline_lighting_shading_err", "oracle_lighting_shading_err",
+                "oracle_albedo_si_mse"):
         acc[key] = []
     angles: list[np.ndarray] = []
     scores, scores_sn, labels, labels_direct = [], [], [], []
@@ -186,6 +190,10 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                 continue
             acc["albedo_si_mse"].append(si_mse(out["albedo"][j], gt["albedo"], fg))
             acc["baseline_albedo_si_mse"].append(si_mse(image[j], gt["albedo"], fg))
+            true_shading = image_model.shading(F.normalize(gt["normal"].double(), dim=0)[None],
+                                               gt["lighting"].double()[None])[0]
+            ceiling = (image[j].double() / (true_shading * gt["direct_shadow"].double()).clamp_min(1e-4)).clamp(0, 1)
+            acc["oracle_albedo_si_mse"].append(si_mse(ceiling.float(), gt["albedo"], fg))
             acc["normal_mae_deg"].append(normal_angle_deg(out["normals"][j], gt["normal"], fg))
             _, mvs = camera.normals_from_depth(photos[j]["depth"][None], photos[j]["K"][None], max_rel_jump=0.1)
             # Upward-facing surfaces (true normal within 10 deg of the world's +Y): ground and
