@@ -29,7 +29,9 @@ Metrics, each next to a trivial baseline:
   further from ``L_gt`` in coefficients than the prior's mean); this one does not. Baseline:
   the prior's mean; reference (``oracle_``): the pipeline's own solve and projection
   (:func:`learned.objectives.solve_projected`) fed the true albedo, normals and sun visibility,
-  i.e. the best a perfect network could get from this lighting step.
+  i.e. the best a perfect network could get from this lighting step, and (``oracle_map_``) the
+  MAP solve in the prior's subspace (:func:`physrelight.image_model.solve_lighting_map`) fed
+  the same.
 
 Ground truth is read with ``SynthDataset(mode="full")``; photos go through the same
 linearisation as in training.
@@ -155,7 +157,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         ``normal_mae_deg_mvs`` / ``_no_mvs``, ``normal_mae_deg_up`` / ``_not_up``), ``shadow_ap`` (labels: sun visibility
         < 0.5), ``shadow_ap_direct`` (labels: direct-light ratio < 0.5),
         ``lighting_rel_err``, ``lighting_si_rel_err``, ``lighting_shading_err`` (and
-        ``oracle_lighting_shading_err``), ``oracle_albedo_si_mse``, the same with ``baseline_``
+        ``oracle_lighting_shading_err``, ``oracle_map_lighting_shading_err``), ``oracle_albedo_si_mse``, the same with ``baseline_``
         prefixed, ``shadow_positive_rate``, ``images``.
     """
     ds = SynthDataset(root, split=split, mode="full")
@@ -171,7 +173,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         "baseline_normal_mae_deg", "baseline_lighting_rel_err", "baseline_lighting_si_rel_err")}
     for key in ("normal_mae_deg_mvs", "normal_mae_deg_no_mvs", "normal_mae_deg_up", "normal_mae_deg_not_up",
                 "lighting_shading_err", "baseline_lighting_shading_err", "oracle_lighting_shading_err",
-                "oracle_albedo_si_mse"):
+                "oracle_map_lighting_shading_err", "oracle_albedo_si_mse"):
         acc[key] = []
     angles: list[np.ndarray] = []
     scores, scores_sn, labels, labels_direct = [], [], [], []
@@ -213,9 +215,12 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                 raw, si = _lighting_errors(light, gt["lighting"])
                 acc[f"{name}lighting_rel_err"].append(raw)
                 acc[f"{name}lighting_si_rel_err"].append(si)
-            _, oracle = solve_projected(image[j:j + 1], gt["albedo"][None], gt["normal"][None], gt["shadow"][None],
-                                        fg[None].to(image.dtype), prior)
-            for name, light in (("", out["lighting"][j]), ("baseline_", mean_light), ("oracle_", oracle[0])):
+            im, alb, nrm, vis, m = image[j:j + 1], gt["albedo"][None], gt["normal"][None], gt["shadow"][None], \
+                fg[None].to(image.dtype)
+            _, oracle = solve_projected(im, alb, nrm, vis, m, prior)
+            oracle_map = image_model.solve_lighting_map(im, alb, nrm, m, prior, shadow=vis)
+            for name, light in (("", out["lighting"][j]), ("baseline_", mean_light), ("oracle_", oracle[0]),
+                                ("oracle_map_", oracle_map[0])):
                 acc[f"{name}lighting_shading_err"].append(shading_error(light, gt["lighting"], gt["normal"], fg))
             labels.append((gt["shadow"][fg] < 0.5).numpy())
             labels_direct.append((gt["direct_shadow"][fg] < 0.5).numpy())

@@ -163,3 +163,49 @@ def test_12_bad_input_raises_a_clear_value_error(make, match: str) -> None:
     n, a, s, light = random_scene()
     with pytest.raises(ValueError, match=match):
         make(n, a, s, light)
+
+
+def _subspace_prior(k: int = 8, seed: int = 0):
+    from physrelight.lighting_prior import fit_lighting_prior
+
+    lights = np.stack([positive_coeffs(2, seed + i) for i in range(60)])
+    return fit_lighting_prior(lights, k=k)
+
+
+def test_13_map_solve_recovers_a_lighting_of_the_subspace_and_falls_back_to_the_prior_mean() -> None:
+    prior = _subspace_prior()
+    n, a, s, _ = random_scene(b=2, seed=3)
+    truth = torch.stack([prior.decode(torch.tensor([0.5, -1.0, 0.3, 0, 0, 0, 0, 0.2], dtype=torch.float64)),
+                         prior.decode(torch.zeros(8, dtype=torch.float64))])
+    i = image_model.render(a, n, truth, s)
+    mask = torch.ones_like(s)
+    # Almost no noise: the least-squares fit inside the subspace, which the noiseless image pins down.
+    tight = image_model.solve_lighting_map(i, a, n, mask, prior, shadow=s, noise=1e-7)
+    torch.testing.assert_close(tight, truth, atol=1e-8, rtol=0)
+    # Overwhelming noise: the data says nothing, the prior's mean comes back.
+    loose = image_model.solve_lighting_map(i, a, n, mask, prior, shadow=s, noise=1e6)
+    torch.testing.assert_close(loose, prior.mean.reshape(9, 3).expand(2, 9, 3).to(loose), atol=1e-6, rtol=0)
+
+
+def test_14_map_solve_is_the_stationary_point_of_its_objective_and_differentiable() -> None:
+    prior = _subspace_prior(k=6, seed=10)
+    n, a, s, light = random_scene(b=1, h=6, w=7, seed=5)
+    noise = torch.randn(1, 3, 6, 7, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    i = image_model.render(a, n, light, s) * (1 + 0.1 * noise)  # not explained exactly by any lighting
+    mask = torch.ones_like(s)
+    out = image_model.solve_lighting_map(i, a, n, mask, prior, shadow=s, noise=0.3)
+    # The objective written out pixel by pixel; its gradient in z vanishes at the solution.
+    basis = prior.components * prior.scale[:, None]
+    z = ((out.reshape(1, 27) - prior.mean) @ basis.T @ torch.linalg.inv(basis @ basis.T)).detach().requires_grad_(True)
+    lit = (prior.mean + z @ basis).reshape(1, 9, 3)
+    target = i / s
+    sigma2 = 0.3**2 * (target**2).mean()
+    objective = ((target - a * image_model.shading(n, lit)) ** 2).sum() + sigma2 * (z**2).sum()
+    (grad,) = torch.autograd.grad(objective, z)
+    assert float(grad.abs().max()) < 1e-8 * float(objective.detach())
+    torch.testing.assert_close(lit.detach(), out)  # out lies in the subspace
+    a_ = a.clone().requires_grad_(True)
+    assert torch.autograd.gradcheck(lambda al: image_model.solve_lighting_map(i.detach(), al, n, mask, prior, s, 0.3),
+                                    (a_,))
+    with pytest.raises(ValueError, match="noise"):
+        image_model.solve_lighting_map(i, a, n, mask, prior, shadow=s, noise=0.0)
