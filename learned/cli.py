@@ -63,6 +63,7 @@ def _config(args: argparse.Namespace, stage: str):
                        lr=args.lr, seed=args.seed, val_every=args.val_every, val_images=args.val_images,
                        ckpt_every=args.ckpt_every, log_every=args.log_every, threads=args.threads,
                        prior=args.prior, inverse=getattr(args, "inverse", None), init=args.init,
+                       lighting_solve=getattr(args, "lighting_solve", "project"),
                        weights=weights, progress=not args.quiet)
 
 
@@ -317,6 +318,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     inv = tsub.add_parser("inverse", help="self-supervised inverse rendering network")
     _common(inv)
+    inv.add_argument("--lighting-solve", choices=("project", "map"), default="project",
+                     help="lighting from the decomposition: least squares + orthogonal projection onto the prior's "
+                          "subspace (the paper; default) or the most probable lighting in the subspace (map)")
     inv.set_defaults(handler=_train_inverse)
 
     sh = tsub.add_parser("shadow", help="ShadowNet on a trained inverse network")

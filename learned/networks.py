@@ -96,17 +96,27 @@ def _check_input(x: torch.Tensor, channels: int, name: str) -> None:
         raise ValueError(f"{name} must be a torch tensor of shape (B, {channels}, H, W), got {shape}")
 
 
+LIGHTING_SOLVES = ("project", "map")
+
+
 class InverseNet(nn.Module):
     """Image -> albedo, normals, shadow (the paper's InverseRenderNet variant, lighting solved outside).
 
     Args:
         width: UNet width (first-level channels).
         depth: UNet depth.
+        lighting_solve: how the lighting is solved from its outputs
+            (:func:`learned.objectives.solve_projected`): ``"project"`` (least squares, then the
+            orthogonal projection onto the prior's subspace: the paper) or ``"map"`` (the most
+            probable lighting in the subspace). Part of the network's identity: its outputs are
+            trained for one of them.
     """
 
-    def __init__(self, width: int = 16, depth: int = 3) -> None:
+    def __init__(self, width: int = 16, depth: int = 3, lighting_solve: str = "project") -> None:
         super().__init__()
-        self.width, self.depth = width, depth
+        if lighting_solve not in LIGHTING_SOLVES:
+            raise ValueError(f"lighting_solve must be one of {LIGHTING_SOLVES}, got {lighting_solve!r}")
+        self.width, self.depth, self.lighting_solve = width, depth, lighting_solve
         self.unet = UNet(3, 7, width, depth)
         with torch.no_grad():
             # Start from a plausible decomposition: mid-grey albedo, camera-facing

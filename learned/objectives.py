@@ -59,18 +59,29 @@ class LossWeights:
 
 
 def solve_projected(image: torch.Tensor, albedo: torch.Tensor, normals: torch.Tensor, shadow: torch.Tensor,
-                    foreground: torch.Tensor, prior: LightingPrior) -> tuple[torch.Tensor, torch.Tensor]:
-    """Solve the lighting over ``foreground`` and project it onto the prior's subspace.
+                    foreground: torch.Tensor, prior: LightingPrior,
+                    method: str = "project") -> tuple[torch.Tensor, torch.Tensor]:
+    """Solve the lighting over ``foreground`` and bring it into the prior's subspace.
 
     Args:
         image, albedo, normals: ``(B, 3, H, W)``; shadow, foreground ``(B, 1, H, W)``.
+        method: ``"project"``: least squares (:func:`physrelight.image_model.solve_lighting`),
+            then the orthogonal projection onto the subspace (the paper); ``"map"``: the most
+            probable lighting in the subspace (:func:`physrelight.image_model.solve_lighting_map`,
+            ``noise=1``).
 
     Returns:
-        ``(solved, projected)``, each ``(B, 9, 3)`` camera-frame radiance SH; both carry
-        gradients to every input.
+        ``(solved, lighting)``, each ``(B, 9, 3)`` camera-frame radiance SH: the unconstrained
+        least-squares solution (the prior loss reads it) and the lighting in the subspace; both
+        carry gradients to every input.
     """
-    solved = image_model.solve_lighting(image, albedo, normals, foreground.to(image.dtype), shadow)
-    return solved, prior.project(solved)
+    mask = foreground.to(image.dtype)
+    solved = image_model.solve_lighting(image, albedo, normals, mask, shadow)
+    if method == "project":
+        return solved, prior.project(solved)
+    if method == "map":
+        return solved, image_model.solve_lighting_map(image, albedo, normals, mask, prior, shadow=shadow).to(image.dtype)
+    raise ValueError(f"method must be 'project' or 'map', got {method!r}")
 
 
 def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Tensor,
@@ -83,12 +94,14 @@ def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Te
 
     Returns:
         ``albedo, normals, shadow`` as the network gives them, ``lighting_solved`` and
-        ``lighting`` (projected) ``(B, 9, 3)``, ``foreground`` ``(B, 1, H, W)`` float.
+        ``lighting`` (in the prior's subspace, by the network's ``lighting_solve``) ``(B, 9, 3)``,
+        ``foreground`` ``(B, 1, H, W)`` float.
     """
     out = dict(net(image))
     fg = (~sky).to(image.dtype)
+    method = getattr(getattr(net, "module", net), "lighting_solve", "project")  # DDP wraps the network
     out["lighting_solved"], out["lighting"] = solve_projected(image, out["albedo"], out["normals"], out["shadow"],
-                                                              fg, prior)
+                                                              fg, prior, method)
     out["foreground"] = fg
     return out
 

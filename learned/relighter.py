@@ -126,14 +126,11 @@ class Relighter:
         d = Path(path) if path is not None else WEIGHTS_DIR
         if not d.is_dir():
             raise FileNotFoundError(f"no weights folder at {str(d)!r}")
-        inv_t, inv_m = ckpt.load_weights(d / "inverse.safetensors")
-        sh_t, sh_m = ckpt.load_weights(d / "shadow.safetensors")
-        if inv_m.get("kind") != "inverse" or sh_m.get("kind") != "shadow":
-            raise ValueError(f"{str(d)!r} does not hold inverse + shadow weights")
-        inverse = InverseNet(int(inv_m["width"]), int(inv_m["depth"]))
-        inverse.load_state_dict(inv_t)
-        shadow = ShadowNet(int(sh_m["width"]), int(sh_m["depth"]))
-        shadow.load_state_dict(sh_t)
+        from .train import load_network
+
+        inverse = load_network(d / "inverse.safetensors", "inverse")
+        shadow = load_network(d / "shadow.safetensors", "shadow")
+        _, inv_m = ckpt.load_weights(d / "inverse.safetensors")  # for its working resolution
         # The second stage, each part when its weights are there.
         segmenter = generator = None
         rpath = Path(renderer) if renderer is not None else d / "renderer.safetensors"

@@ -41,7 +41,7 @@ from . import checkpoint as ckpt
 from .data import PairSampler
 from .evaluate import evaluate
 from .lighting import load_prior
-from .networks import InverseNet, ShadowNet, count_parameters
+from .networks import LIGHTING_SOLVES, InverseNet, ShadowNet, count_parameters
 from .objectives import LossWeights, decompose_and_solve, inverse_losses
 
 __all__ = ["RESUME_FREE_FIELDS", "RunConfig", "TrainConfig", "build_inverse", "load_inverse", "load_network", "load_shadow", "train"]
@@ -107,6 +107,7 @@ class TrainConfig(RunConfig):
     prior: str | None = None
     inverse: str | None = None
     init: str | None = None
+    lighting_solve: str = "project"
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
 
@@ -117,6 +118,8 @@ class TrainConfig(RunConfig):
                            "log_every", "threads"), ("lr",), LossWeights().as_dict())
         if self.stage == "shadow" and self.inverse is None:
             raise ValueError("the shadow stage needs --inverse (an inverse run folder or weights file)")
+        if self.lighting_solve not in LIGHTING_SOLVES:
+            raise ValueError(f"lighting_solve must be one of {LIGHTING_SOLVES}, got {self.lighting_solve!r}")
         if self.init is not None and not Path(self.init).exists():
             raise ValueError(f"init {self.init!r} does not exist (a {self.stage} run folder or weights file)")
 
@@ -126,31 +129,40 @@ def build_inverse(width: int, depth: int, seed: int) -> InverseNet:
     return InverseNet(width, depth)
 
 
-_NETWORKS = {"inverse": InverseNet, "shadow": ShadowNet}
+_NETWORKS = ("inverse", "shadow")
 
 
 def load_network(path: str | Path, kind: str) -> torch.nn.Module:
     """An ``"inverse"`` or ``"shadow"`` network from a run folder (latest checkpoint) or an
     exported weights file (its metadata must say ``kind``), in eval mode."""
     if kind not in _NETWORKS:
-        raise ValueError(f"kind must be one of {sorted(_NETWORKS)}, got {kind!r}")
+        raise ValueError(f"kind must be one of {list(_NETWORKS)}, got {kind!r}")
+    import json
+
     p = Path(path)
     if p.is_dir():
         side = ckpt.latest_checkpoint(p)
         if side is None:
             raise FileNotFoundError(f"no checkpoint in {str(p)!r}")
-        import json
-
-        cfg = json.loads(side.read_text())["config"]
-        net = _NETWORKS[kind](cfg["width"], cfg["depth"])
+        net = _build(kind, json.loads(side.read_text())["config"])
         ckpt.load_checkpoint(side, net, restore_rng=False)
     else:
+        if not p.is_file():
+            raise FileNotFoundError(f"no {kind} run folder or weights file at {str(p)!r}")
         tensors, meta = ckpt.load_weights(p)
         if meta.get("kind") != kind:
             raise ValueError(f"{str(p)!r} holds {meta.get('kind')!r} weights, not {kind!r} ones")
-        net = _NETWORKS[kind](int(meta["width"]), int(meta["depth"]))
+        net = _build(kind, {"width": int(meta["width"]), "depth": int(meta["depth"]),
+                            **json.loads(meta.get("config", "{}"))})
         net.load_state_dict(tensors)
     return net.eval()
+
+
+def _build(kind: str, cfg: dict[str, Any]) -> torch.nn.Module:
+    """An untrained network of a run's configuration (runs before ``lighting_solve`` existed: project)."""
+    if kind == "inverse":
+        return InverseNet(int(cfg["width"]), int(cfg["depth"]), cfg.get("lighting_solve", "project"))
+    return ShadowNet(int(cfg["width"]), int(cfg["depth"]))
 
 
 def load_inverse(path: str | Path) -> InverseNet:
@@ -308,7 +320,7 @@ def train(config: TrainConfig) -> dict[str, Any]:
 
     torch.manual_seed(config.seed)
     if config.stage == "inverse":
-        model: torch.nn.Module = InverseNet(config.width, config.depth)
+        model: torch.nn.Module = InverseNet(config.width, config.depth, config.lighting_solve)
         teacher = None
     else:
         model = ShadowNet(config.width, config.depth)

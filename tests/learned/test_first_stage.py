@@ -297,3 +297,31 @@ def test_12_the_lighting_shading_error_sees_only_what_the_photo_faces() -> None:
     assert shading_error(seen, L, tilted, mask) > 1e-3
     with pytest.raises(ValueError, match="empty mask"):
         shading_error(L, L, up, torch.zeros(1, 8, 8, dtype=torch.bool))
+
+
+def test_13_the_map_lighting_solve_travels_with_the_network(tiny_dataset: Path, tiny_prior: Path,
+                                                            tmp_path: Path) -> None:
+    from learned.objectives import decompose_and_solve
+    from learned.train import load_inverse
+    from physrelight import image_model
+
+    train(config(tiny_dataset, tmp_path / "map", tiny_prior, steps=2, ckpt_every=2, val_every=2,
+                 lighting_solve="map"))
+    ckpt.export_weights(ckpt.latest_checkpoint(tmp_path / "map"), tmp_path / "inverse.safetensors", "inverse")
+    prior = LightingPrior.load(tiny_prior)
+    image = PairSampler(tiny_dataset, split="all", res=24).batch(1, 0).image
+    sky = torch.zeros(image.shape[0], 1, 24, 24, dtype=torch.bool)
+    for source in (tmp_path / "map", tmp_path / "inverse.safetensors"):  # run folder and exported file
+        net = load_inverse(source)
+        assert net.lighting_solve == "map"
+        with torch.no_grad():
+            out = decompose_and_solve(net, image, sky, prior)
+            expected = image_model.solve_lighting_map(image, out["albedo"], out["normals"], torch.ones_like(sky).float(),
+                                                      prior, shadow=out["shadow"])
+        torch.testing.assert_close(out["lighting"], expected.float())
+        torch.testing.assert_close(prior.project(out["lighting"]), out["lighting"], atol=1e-4, rtol=1e-4)
+        assert not torch.allclose(out["lighting"], prior.project(out["lighting_solved"]))  # not the paper's step
+    with pytest.raises(ValueError, match="lighting_solve"):
+        config(tiny_dataset, tmp_path / "x", tiny_prior, lighting_solve="ridge")
+    with pytest.raises(ValueError, match="lighting_solve"):
+        InverseNet(4, 2, "ridge")
