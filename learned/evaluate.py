@@ -17,7 +17,9 @@ Metrics, each next to a trivial baseline:
   then over the images that have such pixels).
 * **shadow AP**: average precision of ``1 - s`` for detecting shadowed pixels
   (ground-truth ``s < 0.5``), pooled over all foreground pixels. Baseline: no shadow
-  (a constant score), whose AP is the fraction of shadowed pixels (chance).
+  (a constant score), whose AP is the fraction of shadowed pixels (chance). Reference
+  (``oracle_shadow_ap``): the shadow the image model implies given everything else true,
+  ``s = mean_c i / (albedo * shading(n; L))``: how much a perfect decomposition could find.
 * **lighting relative error**: ``||L - L_gt|| / ||L_gt||`` (27-D) with ``L_gt`` the true
   camera-frame SH in the photo's units (true SH times ``2**ev`` times the white-balance
   gains of the photo), raw and scale-invariant (``L`` scaled by its optimal scalar, since
@@ -157,7 +159,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         ``normal_mae_deg_mvs`` / ``_no_mvs``, ``normal_mae_deg_up`` / ``_not_up``), ``shadow_ap`` (labels: sun visibility
         < 0.5), ``shadow_ap_direct`` (labels: direct-light ratio < 0.5),
         ``lighting_rel_err``, ``lighting_si_rel_err``, ``lighting_shading_err`` (and
-        ``oracle_lighting_shading_err``, ``oracle_map_lighting_shading_err``), ``oracle_albedo_si_mse``, the same with ``baseline_``
+        ``oracle_lighting_shading_err``, ``oracle_map_lighting_shading_err``), ``oracle_albedo_si_mse``,
+        ``oracle_shadow_ap``, the same with ``baseline_``
         prefixed, ``shadow_positive_rate``, ``images``.
     """
     ds = SynthDataset(root, split=split, mode="full")
@@ -176,7 +179,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                 "oracle_map_lighting_shading_err", "oracle_albedo_si_mse"):
         acc[key] = []
     angles: list[np.ndarray] = []
-    scores, scores_sn, labels, labels_direct = [], [], [], []
+    scores, scores_sn, scores_oracle, labels, labels_direct = [], [], [], [], []
     for start in range(0, len(items), batch_size):
         chunk = items[start:start + batch_size]
         photos = [load_photo(ds, it.scene, it.view, it.light, res) for it in chunk]
@@ -196,6 +199,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                                                gt["lighting"].double()[None])[0]
             ceiling = (image[j].double() / (true_shading * gt["direct_shadow"].double()).clamp_min(1e-4)).clamp(0, 1)
             acc["oracle_albedo_si_mse"].append(si_mse(ceiling.float(), gt["albedo"], fg))
+            implied = (image[j].double() / (gt["albedo"].double() * true_shading).clamp_min(1e-4)).mean(0, keepdim=True)
+            scores_oracle.append((1.0 - implied[fg]).numpy())
             acc["normal_mae_deg"].append(normal_angle_deg(out["normals"][j], gt["normal"], fg))
             _, mvs = camera.normals_from_depth(photos[j]["depth"][None], photos[j]["K"][None], max_rel_jump=0.1)
             # Upward-facing surfaces (true normal within 10 deg of the world's +Y): ground and
@@ -231,6 +236,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
     y = np.concatenate(labels)
     res_["shadow_ap"] = average_precision(np.concatenate(scores), y)
     res_["baseline_shadow_ap"] = average_precision(np.zeros(y.size), y)
+    res_["oracle_shadow_ap"] = average_precision(np.concatenate(scores_oracle), y)
     res_["shadow_positive_rate"] = float(y.mean())
     # The same against the direct-light ratio (< 0.5): a sky-lit umbra counts only if it lost
     # most of its direct light, which is what s in i = s * albedo * shading can explain.

@@ -134,7 +134,7 @@ def test_05_a_tiny_self_supervised_run_lowers_the_loss(tiny_dataset: Path, tiny_
     assert total[-10:].mean() < 0.7 * total[:10].mean()
     for key in ("albedo_si_mse", "normal_mae_deg", "normal_median_deg", "shadow_ap", "lighting_rel_err",
                 "lighting_shading_err", "oracle_lighting_shading_err", "oracle_map_lighting_shading_err",
-                "oracle_albedo_si_mse", "baseline_albedo_si_mse"):
+                "oracle_albedo_si_mse", "oracle_shadow_ap", "baseline_albedo_si_mse"):
         assert np.isfinite(result["val"][key]), key
     assert (tmp_path / "run" / "panels" / "step_0000040.png").is_file()
     assert list((tmp_path / "run" / "tb").iterdir())  # TensorBoard events
