@@ -64,6 +64,7 @@ def _config(args: argparse.Namespace, stage: str):
                        ckpt_every=args.ckpt_every, log_every=args.log_every, threads=args.threads,
                        prior=args.prior, inverse=getattr(args, "inverse", None), init=args.init,
                        lighting_solve=getattr(args, "lighting_solve", "project"),
+                       initial_shadow_logit=getattr(args, "initial_shadow_logit", 3.0),
                        weights=weights, progress=not args.quiet)
 
 
@@ -321,6 +322,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     inv.add_argument("--lighting-solve", choices=("project", "map"), default="project",
                      help="lighting from the decomposition: least squares + orthogonal projection onto the prior's "
                           "subspace (the paper; default) or the most probable lighting in the subspace (map)")
+    inv.add_argument("--initial-shadow-logit", type=float, default=3.0, metavar="X",
+                     help="initial bias of the shadow head, s = sigmoid(X) at the start (default: 3, s = 0.95)")
     inv.set_defaults(handler=_train_inverse)
 
     sh = tsub.add_parser("shadow", help="ShadowNet on a trained inverse network")

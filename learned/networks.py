@@ -110,18 +110,25 @@ class InverseNet(nn.Module):
             orthogonal projection onto the prior's subspace: the paper) or ``"map"`` (the most
             probable lighting in the subspace). Part of the network's identity: its outputs are
             trained for one of them.
+        initial_shadow_logit: the shadow head's initial bias: ``s = sigmoid(.)`` starts there
+            (3: s = 0.95, almost no shadow; the shipped network). A start deep in the sigmoid's
+            flat end scales every gradient reaching ``s`` by ``sigmoid'`` (0.045 at 3), which the
+            held-out runs found to matter (docs/learned.md).
     """
 
-    def __init__(self, width: int = 16, depth: int = 3, lighting_solve: str = "project") -> None:
+    def __init__(self, width: int = 16, depth: int = 3, lighting_solve: str = "project",
+                 initial_shadow_logit: float = 3.0) -> None:
         super().__init__()
         if lighting_solve not in LIGHTING_SOLVES:
             raise ValueError(f"lighting_solve must be one of {LIGHTING_SOLVES}, got {lighting_solve!r}")
+        if not math.isfinite(initial_shadow_logit):
+            raise ValueError(f"initial_shadow_logit must be finite, got {initial_shadow_logit!r}")
         self.width, self.depth, self.lighting_solve = width, depth, lighting_solve
         self.unet = UNet(3, 7, width, depth)
         with torch.no_grad():
             # Start from a plausible decomposition: mid-grey albedo, camera-facing
-            # normals, no shadow (sigmoid(3) = 0.95).
-            self.unet.head.bias.copy_(torch.tensor([0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 3.0]))
+            # normals, little shadow.
+            self.unet.head.bias.copy_(torch.tensor([0.0, 0.0, 0.0, 0.0, 0.0, 1.0, float(initial_shadow_logit)]))
 
     def forward(self, image: torch.Tensor) -> dict[str, torch.Tensor]:
         """``image (B, 3, H, W)`` linear RGB -> ``{"albedo", "normals", "shadow"}``."""

@@ -108,6 +108,7 @@ class TrainConfig(RunConfig):
     inverse: str | None = None
     init: str | None = None
     lighting_solve: str = "project"
+    initial_shadow_logit: float = 3.0
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
 
@@ -118,6 +119,9 @@ class TrainConfig(RunConfig):
                            "log_every", "threads"), ("lr",), LossWeights().as_dict())
         if self.stage == "shadow" and self.inverse is None:
             raise ValueError("the shadow stage needs --inverse (an inverse run folder or weights file)")
+        v = self.initial_shadow_logit
+        if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v)):
+            raise ValueError(f"initial_shadow_logit must be a finite number, got {v!r}")
         if self.lighting_solve not in LIGHTING_SOLVES:
             raise ValueError(f"lighting_solve must be one of {LIGHTING_SOLVES}, got {self.lighting_solve!r}")
         if self.init is not None and not Path(self.init).exists():
@@ -320,7 +324,8 @@ def train(config: TrainConfig) -> dict[str, Any]:
 
     torch.manual_seed(config.seed)
     if config.stage == "inverse":
-        model: torch.nn.Module = InverseNet(config.width, config.depth, config.lighting_solve)
+        model: torch.nn.Module = InverseNet(config.width, config.depth, config.lighting_solve,
+                                            config.initial_shadow_logit)
         teacher = None
     else:
         model = ShadowNet(config.width, config.depth)

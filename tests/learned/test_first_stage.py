@@ -325,3 +325,15 @@ def test_13_the_map_lighting_solve_travels_with_the_network(tiny_dataset: Path, 
         config(tiny_dataset, tmp_path / "x", tiny_prior, lighting_solve="ridge")
     with pytest.raises(ValueError, match="lighting_solve"):
         InverseNet(4, 2, "ridge")
+
+
+def test_14_the_shadow_head_starts_where_asked(tiny_dataset: Path, tiny_prior: Path, tmp_path: Path) -> None:
+    image = PairSampler(tiny_dataset, split="all", res=24).batch(1, 0).image
+    for logit in (3.0, 1.0):
+        torch.manual_seed(0)
+        with torch.no_grad():
+            s = InverseNet(4, 2, initial_shadow_logit=logit)(image)["shadow"]
+        # The head's other weights are small at initialisation: s sits near sigmoid(logit).
+        assert abs(float(s.mean()) - 1 / (1 + np.exp(-logit))) < 0.1, (logit, float(s.mean()))
+    with pytest.raises(ValueError, match="initial_shadow_logit"):
+        config(tiny_dataset, tmp_path / "x", tiny_prior, initial_shadow_logit=float("nan"))
