@@ -160,7 +160,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         < 0.5), ``shadow_ap_direct`` (labels: direct-light ratio < 0.5),
         ``lighting_rel_err``, ``lighting_si_rel_err``, ``lighting_shading_err`` (and
         ``oracle_lighting_shading_err``, ``oracle_map_lighting_shading_err``), ``oracle_albedo_si_mse``,
-        ``oracle_shadow_ap``, the same with ``baseline_``
+        ``oracle_shadow_ap``, ``oracle_lighting_si_rel_err``, the same with ``baseline_``
         prefixed, ``shadow_positive_rate``, ``images``.
     """
     ds = SynthDataset(root, split=split, mode="full")
@@ -176,7 +176,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         "baseline_normal_mae_deg", "baseline_lighting_rel_err", "baseline_lighting_si_rel_err")}
     for key in ("normal_mae_deg_mvs", "normal_mae_deg_no_mvs", "normal_mae_deg_up", "normal_mae_deg_not_up",
                 "lighting_shading_err", "baseline_lighting_shading_err", "oracle_lighting_shading_err",
-                "oracle_map_lighting_shading_err", "oracle_albedo_si_mse"):
+                "oracle_map_lighting_shading_err", "oracle_lighting_si_rel_err", "oracle_albedo_si_mse"):
         acc[key] = []
     angles: list[np.ndarray] = []
     scores, scores_sn, scores_oracle, labels, labels_direct = [], [], [], [], []
@@ -227,6 +227,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
             for name, light in (("", out["lighting"][j]), ("baseline_", mean_light), ("oracle_", oracle[0]),
                                 ("oracle_map_", oracle_map[0])):
                 acc[f"{name}lighting_shading_err"].append(shading_error(light, gt["lighting"], gt["normal"], fg))
+            acc["oracle_lighting_si_rel_err"].append(_lighting_errors(oracle[0], gt["lighting"])[1])
             labels.append((gt["shadow"][fg] < 0.5).numpy())
             labels_direct.append((gt["direct_shadow"][fg] < 0.5).numpy())
             scores.append((1.0 - out["shadow"][j][fg]).numpy())
