@@ -77,6 +77,20 @@ def save_checkpoint(run: str | Path, step: int, model: torch.nn.Module, optimize
     return path
 
 
+def checkpoint_at(run: str | Path, step: int | None = None) -> Path:
+    """Sidecar of ``run``'s checkpoint at ``step`` (None: the latest); ``ValueError`` naming the run
+    when there is none."""
+    if step is None:
+        side = latest_checkpoint(run)
+        if side is None:
+            raise ValueError(f"no checkpoint in {str(run)!r}")
+        return side
+    side = Path(run) / "checkpoints" / f"step_{step:07d}.json"
+    if not (side.is_file() and side.with_suffix(".safetensors").is_file()):
+        raise ValueError(f"no checkpoint of step {step} in {str(run)!r}")
+    return side
+
+
 def latest_checkpoint(run: str | Path) -> Path | None:
     """Sidecar of the latest complete checkpoint in ``run``, or None."""
     d = Path(run) / "checkpoints"

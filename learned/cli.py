@@ -109,10 +109,8 @@ def _export(args: argparse.Namespace) -> int:
     from . import checkpoint as ckpt
 
     dest = Path(args.dest)
-    for kind, run in (("inverse", args.inverse), ("shadow", args.shadow)):
-        side = ckpt.latest_checkpoint(run)
-        if side is None:
-            raise ValueError(f"no checkpoint in {run!r}")
+    for kind, run, step in (("inverse", args.inverse, args.inverse_step), ("shadow", args.shadow, args.shadow_step)):
+        side = ckpt.checkpoint_at(run, step)
         path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind)
         print(f"{kind}: {side} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
     return 0
@@ -239,17 +237,7 @@ def _export_renderer(args: argparse.Namespace) -> int:
     from . import checkpoint as ckpt
     from .train_renderer import export_renderer
 
-    from pathlib import Path
-
-    if args.step is not None:
-        side = Path(args.run) / "checkpoints" / f"step_{args.step:07d}.json"
-        if not side.is_file():
-            raise ValueError(f"no checkpoint of step {args.step} in {args.run!r}")
-    else:
-        side = ckpt.latest_checkpoint(args.run)
-    if side is None:
-        raise ValueError(f"no checkpoint in {args.run!r}")
-    path = export_renderer(side, args.dest)
+    path = export_renderer(ckpt.checkpoint_at(args.run, args.step), args.dest)
     print(f"renderer: {side} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
     return 0
 
@@ -343,6 +331,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ex = tsub.add_parser("export", help="write weights-only safetensors for Relighter.load")
     ex.add_argument("--inverse", required=True, help="inverse run folder")
     ex.add_argument("--shadow", required=True, help="shadow run folder")
+    ex.add_argument("--inverse-step", type=positive_int, default=None, help="inverse checkpoint step (default: latest)")
+    ex.add_argument("--shadow-step", type=positive_int, default=None, help="ShadowNet checkpoint step (default: latest)")
     ex.add_argument("--dest", default="learned/weights", help="destination folder (default: learned/weights)")
     ex.set_defaults(handler=_export)
 

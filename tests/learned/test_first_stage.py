@@ -223,6 +223,13 @@ def test_08_exported_weights_load_offline_and_relight(tiny_dataset: Path, tiny_p
         r.decompose(photo * 3)
     with pytest.raises(ValueError, match="rotation"):
         r.relight(photo, target, world_to_camera=np.diag([1.0, 1.0, -1.0]))
+    # A checkpoint by step (what `train export --inverse-step` and `export-renderer --step` read).
+    assert ckpt.checkpoint_at(tmp_path / "inv", 2) == ckpt.checkpoint_at(tmp_path / "inv") == \
+        ckpt.latest_checkpoint(tmp_path / "inv")
+    with pytest.raises(ValueError, match="no checkpoint of step 99"):
+        ckpt.checkpoint_at(tmp_path / "inv", 99)
+    with pytest.raises(ValueError, match="no checkpoint in"):
+        ckpt.checkpoint_at(tmp_path / "empty")
 
 
 def test_09_the_shipped_weights_load_without_arguments() -> None:
