@@ -134,12 +134,18 @@ def render_geometry(scene: Any, index: int, camera: Camera, spp: int, seed: int)
                        glossy=glossy.astype(np.float32))
 
 
+def render_radiance(scene: Any, index: int, spp: int, seed: int) -> np.ndarray:
+    """``(H, W, 3)`` float32 radiance of view ``index`` by the scene's ``path`` integrator (no shadow
+    buffers: what :func:`render_lit` renders first, with the same seed the same pixels)."""
+    return _film(scene, scene.integrator(), index, spp, seed).astype(np.float32)
+
+
 def render_lit(scene: Any, index: int, lighting: Lighting, spp: int, shadow_spp: int, seed: int,
                timer: Timer | None = None) -> LightBuffers:
     """Radiance (the scene's ``path`` integrator) and shadows of view ``index`` (see :class:`LightBuffers`)."""
     timer = timer or Timer()
     t0 = time.perf_counter()
-    radiance = _film(scene, scene.integrator(), index, spp, seed)
+    radiance = render_radiance(scene, index, spp, seed)
     timer.add("path", t0)
 
     t0 = time.perf_counter()

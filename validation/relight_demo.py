@@ -62,8 +62,8 @@ def _scene(seed: int, size: int, spp: int, log: Callable[[str], None]) -> dict:
             geo = render.render_geometry(mi_scene, 0, cam, spp=8, seed=seed)
             out["sky"] = geo.sky_mask
             out["foreground"] = ~geo.sky_mask & (np.linalg.norm(geo.normal, axis=-1) > 0.5)
-        lit = render.render_lit(mi_scene, 0, light, spp=spp, shadow_spp=4, seed=seed + 17 * k)
-        out["lights"][name] = {"radiance": lit.radiance, "sh": light.sh(2, w2c)}
+        radiance = render.render_radiance(mi_scene, 0, spp=spp, seed=seed + 17 * k)
+        out["lights"][name] = {"radiance": radiance, "sh": light.sh(2, w2c)}
     src = next(iter(out["lights"]))
     out["ev"] = metered_ev(out["lights"][src]["radiance"])
     return out
