@@ -114,10 +114,8 @@ def _relight(args: argparse.Namespace) -> int:
     relighter = Relighter.load(args.weights)
     common = dict(sky_mask=mask, method=args.method, sky=args.sky, new_sky=not args.keep_sky, seed=args.seed)
     if args.sequence:
-        from tqdm import tqdm
-
-        frames = [relighter.relight(photo, target, azimuth_deg=args.azimuth + 360.0 * k / args.sequence, **common)
-                  for k in tqdm(range(args.sequence), desc="relight", disable=args.quiet)]
+        azimuths = args.azimuth + 360.0 * np.arange(args.sequence) / args.sequence
+        frames = relighter.relight_sequence(photo, target, azimuths, progress=not args.quiet, **common)
         _write_gif(out, frames, args.fps)
         print(f"{len(frames)} frames -> {out}")
         return 0

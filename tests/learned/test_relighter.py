@@ -139,3 +139,21 @@ def test_07_a_source_estimate_without_positive_level_falls_back_on_the_prior_lev
     prior_dc = (relighter.prior.mean.reshape(9, 3)[0].float() * lum).sum()
     torch.testing.assert_close((out["target"][0, 0] * lum).sum(), prior_dc)
     assert torch.isfinite(out["relit"]).all()
+
+
+def test_08_a_sequence_decomposes_once_and_gives_the_frames_of_separate_relights(relighter, monkeypatch) -> None:
+    rng = np.random.default_rng(8)
+    photo = (rng.uniform(0.1, 0.9, (40, 60, 3)) * 255).astype(np.uint8)
+    sun = np.array([0.5, 0.6, 0.2])  # a sun direction (world frame), turned about the vertical
+    azimuths = [0.0, 90.0, 200.0]
+    separate = [relighter.relight(photo, sun, azimuth_deg=a, seed=3) for a in azimuths]
+    calls = []
+    original = type(relighter).decompose_linear
+    monkeypatch.setattr(type(relighter), "decompose_linear",
+                        lambda self, *a, **k: calls.append(1) or original(self, *a, **k))
+    frames = relighter.relight_sequence(photo, sun, azimuths, seed=3)
+    assert len(calls) == 1  # one decomposition for the whole sequence
+    assert len(frames) == 3
+    for a, b in zip(frames, separate):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(frames[0], frames[1])  # the light did turn
