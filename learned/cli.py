@@ -237,7 +237,8 @@ def _export_renderer(args: argparse.Namespace) -> int:
     from . import checkpoint as ckpt
     from .train_renderer import export_renderer
 
-    path = export_renderer(ckpt.checkpoint_at(args.run, args.step), args.dest)
+    side = ckpt.checkpoint_at(args.run, args.step)
+    path = export_renderer(side, args.dest)
     print(f"renderer: {side} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
     return 0
 
@@ -331,8 +332,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ex = tsub.add_parser("export", help="write weights-only safetensors for Relighter.load")
     ex.add_argument("--inverse", required=True, help="inverse run folder")
     ex.add_argument("--shadow", required=True, help="shadow run folder")
-    ex.add_argument("--inverse-step", type=positive_int, default=None, help="inverse checkpoint step (default: latest)")
-    ex.add_argument("--shadow-step", type=positive_int, default=None, help="ShadowNet checkpoint step (default: latest)")
+    ex.add_argument("--inverse-step", type=positive_int, default=None,
+                    help="inverse checkpoint step (default: the latest)")
+    ex.add_argument("--shadow-step", type=positive_int, default=None,
+                    help="ShadowNet checkpoint step (default: the latest)")
     ex.add_argument("--dest", default="learned/weights", help="destination folder (default: learned/weights)")
     ex.set_defaults(handler=_export)
 

@@ -80,7 +80,8 @@ def solve_projected(image: torch.Tensor, albedo: torch.Tensor, normals: torch.Te
     if method == "project":
         return solved, prior.project(solved)
     if method == "map":
-        return solved, image_model.solve_lighting_map(image, albedo, normals, mask, prior, shadow=shadow).to(image.dtype)
+        lighting = image_model.solve_lighting_map(image, albedo, normals, mask, prior, shadow=shadow)
+        return solved, lighting.to(image.dtype)
     raise ValueError(f"method must be 'project' or 'map', got {method!r}")
 
 

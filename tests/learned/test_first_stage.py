@@ -230,6 +230,13 @@ def test_08_exported_weights_load_offline_and_relight(tiny_dataset: Path, tiny_p
         ckpt.checkpoint_at(tmp_path / "inv", 99)
     with pytest.raises(ValueError, match="no checkpoint in"):
         ckpt.checkpoint_at(tmp_path / "empty")
+    from physrelight.cli import main
+
+    args = ["train", "export", "--inverse", str(tmp_path / "inv"), "--shadow", str(tmp_path / "sh")]
+    assert main(args + ["--inverse-step", "2", "--dest", str(tmp_path / "by_step")]) == 0
+    for f in ("inverse.safetensors", "shadow.safetensors"):
+        assert ckpt.load_weights(tmp_path / "by_step" / f)[0].keys() == ckpt.load_weights(dest / f)[0].keys()
+    assert main(args + ["--shadow-step", "5", "--dest", str(tmp_path / "none")]) == 2
 
 
 def test_09_the_shipped_weights_load_without_arguments() -> None:

@@ -219,6 +219,13 @@ def test_08_exported_weights_round_trip_and_plug_into_the_pipeline(tiny_dataset:
     run = tmp_path / "run"
     train_renderer(config(tiny_dataset, run, frozen, steps=3, ckpt_every=3))
     dest = export_renderer(ckpt.latest_checkpoint(run), tmp_path / "w" / "renderer.safetensors")
+    # The command line writes the same tensors, and names a missing step in one line.
+    from physrelight.cli import main
+
+    cli = ["train", "export-renderer", "--run", str(run), "--step"]
+    assert main(cli + ["3", "--dest", str(tmp_path / "c.safetensors")]) == 0
+    assert all(torch.equal(load_file(str(tmp_path / "c.safetensors"))[k], v) for k, v in load_file(str(dest)).items())
+    assert main(cli + ["7", "--dest", str(tmp_path / "d.safetensors")]) == 2
     net = load_renderer(dest)
     meta = ckpt.load_weights(dest)[1]
     assert meta["kind"] == "renderer" and (meta["width"], meta["depth"], meta["additive"]) == ("4", "2", "1")
