@@ -49,11 +49,10 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from physrelight import camera, image_model
 from physrelight.lighting_prior import LightingPrior
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import photo_gain
-
-from physrelight import camera, image_model
 
 from .data import load_photo
 from .objectives import solve_projected
@@ -71,17 +70,22 @@ def si_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> floa
     return float(((alpha * p - g) ** 2).mean())
 
 
-def _angles_deg(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> np.ndarray:
+def _angle_map_deg(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """``(1, H, W)`` angle in degrees between ``(3, H, W)`` normals, pixel by pixel."""
     cos = (F.normalize(pred.double(), dim=0) * F.normalize(target.double(), dim=0)).sum(0, keepdim=True)
-    return torch.rad2deg(torch.acos(cos.clamp(-1.0, 1.0)))[mask].numpy()
+    return torch.rad2deg(torch.acos(cos.clamp(-1.0, 1.0)))
+
+
+def _masked_mean(values: torch.Tensor, mask: torch.Tensor, name: str) -> float:
+    picked = values[mask].numpy()
+    if picked.size == 0:
+        raise ValueError(f"{name}: empty mask")
+    return float(picked.mean())
 
 
 def normal_angle_deg(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
     """Mean angle in degrees between ``(3, H, W)`` unit normals over ``mask (1, H, W)``."""
-    ang = _angles_deg(pred, target, mask)
-    if ang.size == 0:
-        raise ValueError("normal_angle_deg: empty mask")
-    return float(ang.mean())
+    return _masked_mean(_angle_map_deg(pred, target), mask, "normal_angle_deg")
 
 
 def average_precision(scores: np.ndarray, labels: np.ndarray) -> float:
@@ -195,24 +199,24 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                 continue
             acc["albedo_si_mse"].append(si_mse(out["albedo"][j], gt["albedo"], fg))
             acc["baseline_albedo_si_mse"].append(si_mse(image[j], gt["albedo"], fg))
-            true_shading = image_model.shading(F.normalize(gt["normal"].double(), dim=0)[None],
-                                               gt["lighting"].double()[None])[0]
+            true_normal = F.normalize(gt["normal"].double(), dim=0)
+            true_shading = image_model.shading(true_normal[None], gt["lighting"].double()[None])[0]
             ceiling = (image[j].double() / (true_shading * gt["direct_shadow"].double()).clamp_min(1e-4)).clamp(0, 1)
             acc["oracle_albedo_si_mse"].append(si_mse(ceiling.float(), gt["albedo"], fg))
             implied = (image[j].double() / (gt["albedo"].double() * true_shading).clamp_min(1e-4)).mean(0, keepdim=True)
             scores_oracle.append((1.0 - implied[fg]).numpy())
-            acc["normal_mae_deg"].append(normal_angle_deg(out["normals"][j], gt["normal"], fg))
+            angle = _angle_map_deg(out["normals"][j], gt["normal"])  # once; every normal figure reads it
+            acc["normal_mae_deg"].append(_masked_mean(angle, fg, "normal_mae_deg"))
             _, mvs = camera.normals_from_depth(photos[j]["depth"][None], photos[j]["K"][None], max_rel_jump=0.1)
             # Upward-facing surfaces (true normal within 10 deg of the world's +Y): ground and
             # tops, the easy part; everything else: walls, risers, statues.
             up = photos[j]["world_to_camera"][:3, 1].double()  # world +Y in the camera frame
-            facing_up = (F.normalize(gt["normal"].double(), dim=0) * up[:, None, None]).sum(0, keepdim=True) \
-                > math.cos(math.radians(10.0))
+            facing_up = (true_normal * up[:, None, None]).sum(0, keepdim=True) > math.cos(math.radians(10.0))
             for key, where in (("normal_mae_deg_mvs", fg & mvs[0]), ("normal_mae_deg_no_mvs", fg & ~mvs[0]),
                                ("normal_mae_deg_up", fg & facing_up), ("normal_mae_deg_not_up", fg & ~facing_up)):
                 if bool(where.any()):
-                    acc[key].append(normal_angle_deg(out["normals"][j], gt["normal"], where))
-            angles.append(_angles_deg(out["normals"][j], gt["normal"], fg))
+                    acc[key].append(_masked_mean(angle, where, key))
+            angles.append(angle[fg].numpy())
             flat = torch.zeros_like(gt["normal"])
             flat[2] = 1.0
             acc["baseline_normal_mae_deg"].append(normal_angle_deg(flat, gt["normal"], fg))
