@@ -218,11 +218,30 @@ def _rank_divergence(model: torch.nn.Module, world: int) -> float:
 # ------------------------------------------------------------------------- logs
 
 
+def _settle_header(path: Path, wanted: list[str]) -> list[str]:
+    """The columns ``path`` is written under from now on: its own, plus any of ``wanted`` it lacks
+    (e.g. a run resumed under newer code whose metrics gained a column). When columns are added,
+    the file is rewritten under them, so that no row lands under the wrong heading."""
+    if not path.is_file():
+        return wanted
+    with path.open(newline="") as f:
+        reader = csv.DictReader(f)
+        rows, old = list(reader), list(reader.fieldnames or [])
+    header = old + [k for k in wanted if k not in old]
+    if header != old:
+        with io.atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=header, restval="")
+            w.writeheader()
+            w.writerows(rows)
+    return header
+
+
 class _Logs:
     """CSV and TensorBoard writers of rank 0; on resume the CSV keeps rows up to ``step``."""
 
     def __init__(self, run: Path, start: int, enabled: bool) -> None:
         self.run, self.enabled = run, enabled
+        self._headers: dict[str, list[str]] = {}  # each CSV's columns, read from disk once
         self.tb = None
         if not enabled:
             return
@@ -244,19 +263,9 @@ class _Logs:
         if not self.enabled:
             return
         path = self.run / name
-        header = ["step", *values.keys()]
-        if path.is_file():
-            with path.open(newline="") as f:
-                reader = csv.DictReader(f)
-                rows, old = list(reader), list(reader.fieldnames or [])
-            if old != header:
-                # Metrics gained or lost a column (e.g. a run resumed under newer code): rewrite the
-                # file under the union of columns so that no row lands under the wrong heading.
-                header = old + [k for k in header if k not in old]
-                with io.atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
-                    w = csv.DictWriter(f, fieldnames=header, restval="")
-                    w.writeheader()
-                    w.writerows(rows)
+        header = self._headers.get(name)
+        if header is None or any(k not in header for k in values):  # first write here, or a new metric
+            header = self._headers[name] = _settle_header(path, ["step", *values])
         new = not path.is_file()
         row = {"step": step, **{k: f"{v:.8g}" for k, v in values.items()}}
         with path.open("a", newline="") as f:
