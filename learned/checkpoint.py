@@ -23,7 +23,8 @@ import torch
 from safetensors.torch import load_file, save_file
 from safetensors import safe_open
 
-__all__ = ["export_weights", "latest_checkpoint", "load_checkpoint", "load_weights", "resume", "save_checkpoint"]
+__all__ = ["checkpoint_at", "export_weights", "latest_checkpoint", "load_checkpoint", "load_weights", "read_metadata", "resume",
+           "save_checkpoint"]
 
 _NAME = re.compile(r"^step_(\d{7})\.json$")
 
@@ -159,13 +160,18 @@ def export_weights(sidecar: str | Path, dest: str | Path, kind: str, submodule: 
     return dest
 
 
-def load_weights(path: str | Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
-    """Tensors and metadata of a file written by :func:`export_weights`."""
+def read_metadata(path: str | Path) -> dict[str, str]:
+    """The metadata of a file written by :func:`export_weights` (its header only, no tensors)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no weights at {str(path)!r}")
     with safe_open(str(path), framework="pt") as f:
-        meta = dict(f.metadata() or {})
+        return dict(f.metadata() or {})
+
+
+def load_weights(path: str | Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
+    """Tensors and metadata of a file written by :func:`export_weights`."""
+    meta = read_metadata(path)
     return load_file(str(path)), meta
 
 

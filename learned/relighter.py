@@ -130,7 +130,7 @@ class Relighter:
 
         inverse = load_network(d / "inverse.safetensors", "inverse")
         shadow = load_network(d / "shadow.safetensors", "shadow")
-        _, inv_m = ckpt.load_weights(d / "inverse.safetensors")  # for its working resolution
+        inv_m = ckpt.read_metadata(d / "inverse.safetensors")  # for its working resolution
         # The second stage, each part when its weights are there.
         segmenter = generator = None
         rpath = Path(renderer) if renderer is not None else d / "renderer.safetensors"
