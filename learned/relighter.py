@@ -381,8 +381,9 @@ class Relighter:
                                           world_to_camera, sky_type).float()
         full = self.relight_full_resolution(lin, sky, target_cam, method=method,
                                             decomposition=reuse.get("decomposition"))
-        reuse["decomposition"] = {k: full["working"][k] for k in (
-            "albedo", "normals", "shadow", "lighting", "foreground")}
+        if "decomposition" not in reuse:
+            reuse["decomposition"] = {k: full["working"][k] for k in (
+                "albedo", "normals", "shadow", "lighting", "foreground")}
         relit, out, small_sky = full["relit"], full["working"], full["working_sky"]
         size = lin.shape[-2:]
 
