@@ -127,13 +127,14 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
 
     r = 5  # SSIM needs mask pixels at least 5 px from the border
     for start in tqdm(range(0, len(cases), batch_size), disable=not progress, desc="evaluate relight"):
-        chunk = cases[start:start + batch_size]
-        loaded = [(c[0], load_case(ds, *c, res=res)) for c in chunk]
-        loaded = [(name, c) for name, c in loaded if bool(c["fg"][:, r:-r, r:-r].any())]
+        loaded = []
+        for c in cases[start:start + batch_size]:
+            case = load_case(ds, *c, res=res)
+            if bool(case["fg"][:, r:-r, r:-r].any()):
+                loaded.append(case)
+                scenes.append(c[0])
         if not loaded:
             continue
-        scenes.extend(name for name, _ in loaded)
-        loaded = [c for _, c in loaded]
         batch = {k: torch.stack([c[k] for c in loaded]) for k in loaded[0]}
         count += len(loaded)
         for m in methods:
