@@ -65,6 +65,7 @@ def _config(args: argparse.Namespace, stage: str):
                        prior=args.prior, inverse=getattr(args, "inverse", None), init=args.init,
                        lighting_solve=getattr(args, "lighting_solve", "project"),
                        initial_shadow_logit=getattr(args, "initial_shadow_logit", 3.0),
+                       mvs_stencil=getattr(args, "mvs_stencil", "central"),
                        weights=weights, progress=not args.quiet)
 
 
@@ -313,6 +314,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                           "subspace (the paper; default) or the most probable lighting in the subspace (map)")
     inv.add_argument("--initial-shadow-logit", type=float, default=3.0, metavar="X",
                      help="initial bias of the shadow head, s = sigmoid(X) at the start (default: 3, s = 0.95)")
+    inv.add_argument("--mvs-stencil", choices=("central", "one_sided"), default="central",
+                     help="normals of the MVS-like depth for the normal term: central differences (default) or "
+                          "one-sided next to holes and edges (more supervised pixels)")
     inv.set_defaults(handler=_train_inverse)
 
     sh = tsub.add_parser("shadow", help="ShadowNet on a trained inverse network")

@@ -168,10 +168,12 @@ class PairSampler:
                      world_to_camera=stack["world_to_camera"], keys=keys)
 
 
-def mvs_normals(batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
+def mvs_normals(batch: Batch, stencil: str = "central") -> tuple[torch.Tensor, torch.Tensor]:
     """Normals of the MVS-like depth ``(2B, 3, H, W)`` and where they are valid ``(2B, 1, H, W)`` bool.
 
-    Depth edges (relative jump > 10 %) and sky are excluded.
+    Depth edges (relative jump > 10 %) and sky are excluded. ``stencil``: ``"central"`` or
+    ``"one_sided"`` (normals next to holes and edges too, see
+    :func:`physrelight.camera.normals_from_depth`).
     """
-    n, valid = camera.normals_from_depth(batch.depth, batch.K, max_rel_jump=0.1)
+    n, valid = camera.normals_from_depth(batch.depth, batch.K, max_rel_jump=0.1, stencil=stencil)
     return n, valid & ~batch.sky

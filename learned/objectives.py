@@ -128,8 +128,12 @@ def _masked(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
 
 
 def inverse_losses(net: torch.nn.Module, batch: Batch, prior: LightingPrior,
-                   weights: LossWeights = LossWeights()) -> tuple[torch.Tensor, dict[str, float], dict[str, torch.Tensor]]:
+                   weights: LossWeights = LossWeights(),
+                   mvs_stencil: str = "central") -> tuple[torch.Tensor, dict[str, float], dict[str, torch.Tensor]]:
     """The weighted self-supervised loss of a batch.
+
+    ``mvs_stencil`` is how the normal term's targets are taken from the MVS-like depth
+    (see :func:`physrelight.camera.normals_from_depth`).
 
     Returns:
         ``(total, terms, outputs)``: the scalar to minimise, each unweighted term as a
@@ -154,7 +158,7 @@ def inverse_losses(net: torch.nn.Module, batch: Batch, prior: LightingPrior,
     image_w, albedo_w, shadow_w = warped[:, 0:3], warped[:, 3:6], warped[:, 6:7]
     terms["albedo"] = _masked(albedo - _match_scale(albedo_w, albedo, overlap), overlap)
 
-    n_mvs, n_valid = mvs_normals(batch)
+    n_mvs, n_valid = mvs_normals(batch, mvs_stencil)
     terms["normal"] = _masked(normals - n_mvs, n_valid.to(image.dtype))
 
     # Lighting of the partner (its camera frame) rotated into this view: R_dst R_src^T.

@@ -44,7 +44,9 @@ from .lighting import load_prior
 from .networks import LIGHTING_SOLVES, InverseNet, ShadowNet, count_parameters
 from .objectives import LossWeights, decompose_and_solve, inverse_losses
 
-__all__ = ["RESUME_FREE_FIELDS", "RunConfig", "TrainConfig", "build_inverse", "load_inverse", "load_network", "load_shadow", "train"]
+__all__ = ["MVS_STENCILS", "RESUME_FREE_FIELDS", "RunConfig", "TrainConfig", "build_inverse", "load_inverse", "load_network", "load_shadow", "train"]
+
+MVS_STENCILS = ("central", "one_sided")  # how the normal term reads the MVS-like depth
 
 STAGES = ("inverse", "shadow")
 
@@ -109,6 +111,7 @@ class TrainConfig(RunConfig):
     init: str | None = None
     lighting_solve: str = "project"
     initial_shadow_logit: float = 3.0
+    mvs_stencil: str = "central"
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
 
@@ -124,6 +127,8 @@ class TrainConfig(RunConfig):
             raise ValueError(f"initial_shadow_logit must be a finite number, got {v!r}")
         if self.lighting_solve not in LIGHTING_SOLVES:
             raise ValueError(f"lighting_solve must be one of {LIGHTING_SOLVES}, got {self.lighting_solve!r}")
+        if self.mvs_stencil not in MVS_STENCILS:
+            raise ValueError(f"mvs_stencil must be one of {MVS_STENCILS}, got {self.mvs_stencil!r}")
         if self.init is not None and not Path(self.init).exists():
             raise ValueError(f"init {self.init!r} does not exist (a {self.stage} run folder or weights file)")
 
@@ -368,7 +373,7 @@ def train(config: TrainConfig) -> dict[str, Any]:
         t0 = time.perf_counter()
         batch = sampler.batch(config.batch, step, rank)
         if config.stage == "inverse":
-            loss, terms, _ = inverse_losses(net, batch, prior, weights)
+            loss, terms, _ = inverse_losses(net, batch, prior, weights, config.mvs_stencil)
         else:
             with torch.no_grad():
                 dec = decompose_and_solve(teacher, batch.image, batch.sky, prior)

@@ -517,9 +517,9 @@ def project(points: Array, K: Array) -> tuple[Array, Array]:
 
 
 def normals_from_depth(
-    depth: Array, K: Array, max_rel_jump: float | None = None
+    depth: Array, K: Array, max_rel_jump: float | None = None, stencil: str = "central"
 ) -> tuple[Array, Array]:
-    """Surface normals in the camera frame from a depth map, by central differences.
+    """Surface normals in the camera frame from a depth map, by finite differences.
 
     At pixel (i, j) the back-projected points of the 4-neighbour stencil give
     ``n = (P[i+1, j] - P[i-1, j]) x (P[i, j+1] - P[i, j-1])`` (v down x u right, which
@@ -528,31 +528,47 @@ def normals_from_depth(
     surfaces; across a depth discontinuity they give a wrong (but finite) normal:
     mask those with ``max_rel_jump`` or your own edge mask.
 
+    ``stencil="one_sided"`` keeps the central difference wherever it is usable and,
+    per image axis, falls back to the one usable side (``P[i, j+1] - P[i, j]`` or
+    ``P[i, j] - P[i, j-1]``) where the other neighbour is missing, off the image or
+    across a jump. Still exact on planes, first-order on curved surfaces there; it gives
+    normals next to holes, depth edges and the image border, which the central stencil
+    leaves out (on the synthetic MVS-like depth: 62 % of the foreground instead of 49 %).
+
     Args:
         depth: ``(B, 1, H, W)`` z-depth (0 / non-finite = missing). Main argument.
         K: ``(3, 3)`` or ``(B, 3, 3)`` intrinsics.
-        max_rel_jump: if given, also mark pixels invalid where a stencil neighbour's
-            depth differs from the centre's by more than ``max_rel_jump * depth``
-            (a crude depth-edge detector; note that a plane seen at a grazing angle has
-            large relative steps too).
+        max_rel_jump: if given, a neighbour whose depth differs from the centre's by more
+            than ``max_rel_jump * depth`` is not used (a crude depth-edge detector; note
+            that a plane seen at a grazing angle has large relative steps too). With the
+            central stencil one such neighbour invalidates the pixel; the one-sided
+            stencil measures the step against the nearer of the two depths.
+        stencil: ``"central"`` (default) or ``"one_sided"`` (see above).
 
     Returns:
         ``normals``: ``(B, 3, H, W)`` unit normals, camera frame, where valid; the zero
         vector where not (so an unmasked use shows up instead of looking plausible).
-        ``valid``: ``(B, 1, H, W)`` bool; False on the one-pixel image border (the
-        stencil leaves the image), where any of the 5 stencil depths is missing, where
-        the cross product degenerates (|n| <= 1e-9 |dP/du| |dP/dv|), or at jumps.
+        ``valid``: ``(B, 1, H, W)`` bool. Central: False on the one-pixel image border
+        (the stencil leaves the image), where any of the 5 stencil depths is missing,
+        where the cross product degenerates (|n| <= 1e-9 |dP/du| |dP/dv|), or at jumps.
+        One-sided: False where the centre's depth is missing, where an axis has no usable
+        neighbour, or where the cross product degenerates.
     """
     d, restore = to_tensor(depth, "depth")
     _check_depth(d, "depth")
     if max_rel_jump is not None and not (math.isfinite(max_rel_jump) and max_rel_jump > 0):
         raise ValueError(f"max_rel_jump must be a positive finite number or None, got {max_rel_jump!r}")
+    if stencil not in ("central", "one_sided"):
+        raise ValueError(f"stencil must be 'central' or 'one_sided', got {stencil!r}")
     B, _, H, W = d.shape
     if H < 3 or W < 3:
         raise ValueError(f"depth must be at least 3x3 for central differences, got {H}x{W}")
     Kt = _check_K(K, "K", d, B)
     P = _backproject(d, Kt)
     ok = _valid(d)
+    if stencil == "one_sided":
+        normals, valid = _normals_one_sided(d, P, ok, max_rel_jump)
+        return restore(normals), _mask_out(valid, _is_torch(depth))
 
     c = (slice(None), slice(None), slice(1, -1), slice(1, -1))
     du = P[..., 1:-1, 2:] - P[..., 1:-1, :-2]  # along u (right)
@@ -576,6 +592,42 @@ def normals_from_depth(
     normals = F.pad(n, (1, 1, 1, 1))
     valid = F.pad(good, (1, 1, 1, 1), value=False)
     return restore(normals), _mask_out(valid, _is_torch(depth))
+
+
+def _side_differences(d: torch.Tensor, P: torch.Tensor, ok: torch.Tensor, max_rel_jump: float | None,
+                      dim: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Internal: the difference of ``P (B, 3, H, W)`` along ``dim`` (2 = v, 3 = u) from the usable sides.
+
+    Central where both neighbours are usable, else the one usable side; ``(B, 3, H, W)``
+    and where any side was usable ``(B, 1, H, W)`` bool.
+    """
+    n = d.shape[dim]
+    step = P.narrow(dim, 1, n - 1) - P.narrow(dim, 0, n - 1)  # P[k + 1] - P[k], at k
+    d0, d1 = d.narrow(dim, 0, n - 1), d.narrow(dim, 1, n - 1)
+    usable = ok.narrow(dim, 0, n - 1) & ok.narrow(dim, 1, n - 1)
+    if max_rel_jump is not None:
+        with torch.no_grad():
+            usable = usable & ~torch.nan_to_num((d1 - d0).abs() > max_rel_jump * torch.minimum(d0, d1), nan=True)
+    pad_after = [0, 0] * (3 - dim) + [0, 1]  # F.pad lists the last dimension first
+    pad_before = [0, 0] * (3 - dim) + [1, 0]
+    fwd, fwd_ok = F.pad(step, pad_after), F.pad(usable, pad_after, value=False)  # forward side at k
+    bwd, bwd_ok = F.pad(step, pad_before), F.pad(usable, pad_before, value=False)  # backward side at k
+    diff = torch.where(fwd_ok & bwd_ok, fwd + bwd, torch.where(fwd_ok, fwd, bwd))
+    return diff, fwd_ok | bwd_ok
+
+
+def _normals_one_sided(d: torch.Tensor, P: torch.Tensor, ok: torch.Tensor,
+                       max_rel_jump: float | None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Internal: :func:`normals_from_depth` with ``stencil="one_sided"`` on checked tensors."""
+    dv, ok_v = _side_differences(d, P, ok, max_rel_jump, 2)
+    du, ok_u = _side_differences(d, P, ok, max_rel_jump, 3)
+    n = torch.linalg.cross(dv, du, dim=1)
+    nn_ = n.norm(dim=1, keepdim=True)
+    scale = du.norm(dim=1, keepdim=True) * dv.norm(dim=1, keepdim=True)
+    good = ok & ok_v & ok_u & (nn_.detach() > 1e-9 * scale.detach()) & (scale.detach() > 0)
+    n = torch.where(good, n / torch.where(good, nn_, torch.ones_like(nn_)), torch.zeros_like(n))
+    n = torch.where((n * -P).sum(dim=1, keepdim=True) < 0, -n, n)
+    return n, good
 
 
 # --------------------------------------------------------------------------------------
