@@ -530,6 +530,7 @@ _P[3, 0] = 0.1  # projective last row
         (lambda: cam.look_at([0, 5.0, 0], [0, 0, 0.0]), "parallel"),
         (lambda: cam.project(np.zeros((1, 2, 3)), _K), r"points must have shape \(B, 3"),
         (lambda: cam.normals_from_depth(np.full((1, 1, 2, 5), 1.0), _K), "at least 3x3"),
+        (lambda: cam.normals_from_depth(np.full((1, 1, 4, 5), 1.0), _K, stencil="sobel"), "stencil must be"),
         (lambda: cam.warp(np.full((1, 3, 4, 5), np.nan), _D, _K, _K, np.eye(4)), "image_src holds"),
         (lambda: cam.warp(np.zeros((1, 3, 4, 5)), _D, _K, _K, _S), "dst_to_src is not a rigid"),
         (lambda: cam.warp(np.zeros((1, 3, 4, 5)), _D, _K, _K, np.eye(4), rel_tol=0.0), "rel_tol"),
@@ -551,3 +552,91 @@ def test_16_camera_bundle_shortens_call_sites(views):
     np.testing.assert_allclose(cb.pose_to(ca).numpy(), a["T"] @ np.linalg.inv(b["T"]), atol=1e-12)
     with pytest.raises(ValueError, match="not a rigid"):
         cam.Camera(K=K_NP, world_to_camera=_S, width=W, height=H)
+
+
+# ----------------------------------------------------------------------------------------
+# One-sided normals (more pixels next to holes, edges and the border)
+# ----------------------------------------------------------------------------------------
+
+
+def _holed_depth(v) -> np.ndarray:
+    """View depth with the background missing and a few holes punched into surfaces."""
+    depth = v["depth"].copy()
+    depth[~v["hit"]] = np.inf
+    for i, j in [(40, 20), (50, 60), (33, 45), (20, 30), (60, 10)]:
+        depth[i - 1 : i + 2, j - 1 : j + 2] = 0.0
+    depth[45, 70:72] = np.nan
+    return depth
+
+
+def _same_surface_or_missing(ids: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Pixels whose every in-image 4-neighbour is missing or on the pixel's own surface."""
+    ok = np.isfinite(depth) & (depth > 0)
+    out = ok & (ids > 0)
+    pad_ids = np.pad(ids, 1, constant_values=-1)
+    pad_ok = np.pad(ok, 1, constant_values=False)
+    h, w = ids.shape
+    for di, dj in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        nb_ids = pad_ids[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
+        nb_ok = pad_ok[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
+        out &= ~nb_ok | (nb_ids == ids)
+    return out
+
+
+def test_17_one_sided_normals_extend_the_central_ones_and_stay_exact_on_planes(views):
+    _, b = views
+    depth = _holed_depth(b)
+    n0, v0 = cam.normals_from_depth(to_bchw(depth), K_NP)
+    n1, v1 = cam.normals_from_depth(to_bchw(depth), K_NP, stencil="one_sided")
+    n0, v0, n1, v1 = n0[0].transpose(1, 2, 0), v0[0, 0], n1[0].transpose(1, 2, 0), v1[0, 0]
+    # Where the central stencil works, the one-sided one is the central one.
+    assert np.array_equal(v0 & v1, v0)
+    np.testing.assert_allclose(n1[v0], n0[v0], atol=1e-12)
+    extra = v1 & ~v0
+    assert extra.sum() > 100  # next to the holes, the silhouettes and on the image border
+    border = np.ones_like(extra)
+    border[1:-1, 1:-1] = False
+    assert (extra & border).sum() > 10  # the central stencil never reaches the border
+    ang = np.degrees(np.arccos(np.clip((n1 * b["n_cam"]).sum(-1), -1, 1)))
+    planar = (b["ids"] == 1) | (b["ids"] >= 10)
+    clean = extra & planar & _same_surface_or_missing(b["ids"], depth)
+    assert clean.sum() > 50 and ang[clean].max() < 1e-4, (clean.sum(), ang[clean].max())  # still exact on planes
+    # On the sphere the fallback is first order: worse than central, still close.
+    sphere = extra & (b["ids"] == 2) & _same_surface_or_missing(b["ids"], depth) & (_view_cosine(b) > 0.6)
+    assert sphere.sum() > 5 and ang[sphere].mean() < 5.0, (sphere.sum(), ang[sphere].mean())
+    np.testing.assert_allclose(np.linalg.norm(n1[v1], axis=-1), 1.0, atol=1e-12)
+    assert np.all(n1[~v1] == 0)
+    P = b["X"] @ b["T"][:3, :3].T + b["T"][:3, 3]
+    assert np.all((n1[v1] * -P[v1]).sum(-1) > 0)  # faces the camera
+
+
+def test_18_one_sided_normals_need_a_usable_neighbour_per_axis_and_skip_jumps(views):
+    _, b = views
+    depth = _holed_depth(b)
+    ok = np.isfinite(depth) & (depth > 0)
+    _, v1 = cam.normals_from_depth(to_bchw(depth), K_NP, stencil="one_sided")
+    v1 = v1[0, 0]
+    pad = np.pad(ok, 1, constant_values=False)
+    has_v = pad[:-2, 1:-1] | pad[2:, 1:-1]
+    has_u = pad[1:-1, :-2] | pad[1:-1, 2:]
+    assert np.array_equal(v1, ok & has_v & has_u)  # exactly: no degenerate stencil on this scene
+    isolated = depth.copy()
+    isolated[30, 39] = isolated[30, 41] = 0.0  # (30, 40) keeps its vertical neighbours only
+    _, vi = cam.normals_from_depth(to_bchw(isolated), K_NP, stencil="one_sided")
+    assert ok[30, 40] and not vi[0, 0, 30, 40]
+    # With a jump threshold a side across a silhouette is not used: the pixel keeps its
+    # other side and, on a plane whose other neighbours are its own, its exact normal.
+    nj, vj = cam.normals_from_depth(to_bchw(depth), K_NP, max_rel_jump=0.2, stencil="one_sided")
+    _, vc = cam.normals_from_depth(to_bchw(depth), K_NP, max_rel_jump=0.2)
+    nj, vj, vc = nj[0].transpose(1, 2, 0), vj[0, 0], vc[0, 0]
+    ang = np.degrees(np.arccos(np.clip((nj * b["n_cam"]).sum(-1), -1, 1)))
+    d = np.where(ok, depth, np.nan)
+    pd, pids = np.pad(d, 1, constant_values=np.nan), np.pad(b["ids"], 1, constant_values=-1)
+    clean = vj & ~vc & ((b["ids"] == 1) | (b["ids"] >= 10))
+    h, w = d.shape
+    for di, dj in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        nd, nid = pd[1 + di : 1 + di + h, 1 + dj : 1 + dj + w], pids[1 + di : 1 + di + h, 1 + dj : 1 + dj + w]
+        with np.errstate(invalid="ignore"):
+            jump = np.abs(nd - d) > 0.2 * np.fmin(nd, d)
+        clean &= ~np.isfinite(nd) | (nid == b["ids"]) | jump
+    assert clean.sum() > 20 and ang[clean].max() < 1e-4, (clean.sum(), ang[clean].max())
