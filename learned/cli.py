@@ -112,7 +112,8 @@ def _export(args: argparse.Namespace) -> int:
     dest = Path(args.dest)
     for kind, run, step in (("inverse", args.inverse, args.inverse_step), ("shadow", args.shadow, args.shadow_step)):
         side = ckpt.checkpoint_at(run, step)
-        path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind)
+        extra = {"lighting_solve": args.lighting_solve} if kind == "inverse" and args.lighting_solve else None
+        path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind, extra=extra)
         print(f"{kind}: {side} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
     return 0
 
@@ -309,9 +310,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     inv = tsub.add_parser("inverse", help="self-supervised inverse rendering network")
     _common(inv)
-    inv.add_argument("--lighting-solve", choices=("project", "map"), default="project",
+    inv.add_argument("--lighting-solve", choices=("project", "map", "map_relative"), default="project",
                      help="lighting from the decomposition: least squares + orthogonal projection onto the prior's "
-                          "subspace (the paper; default) or the most probable lighting in the subspace (map)")
+                          "subspace (the paper; default), the most probable lighting in the subspace (map), or the "
+                          "same with the prior on the lighting's shape only, its level fitted (map_relative)")
     inv.add_argument("--initial-shadow-logit", type=float, default=3.0, metavar="X",
                      help="initial bias of the shadow head, s = sigmoid(X) at the start (default: 3, s = 0.95)")
     inv.add_argument("--mvs-stencil", choices=("central", "one_sided"), default="central",
@@ -341,6 +343,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ex.add_argument("--shadow-step", type=positive_int, default=None,
                     help="ShadowNet checkpoint step (default: the latest)")
     ex.add_argument("--dest", default="learned/weights", help="destination folder (default: learned/weights)")
+    ex.add_argument("--lighting-solve", choices=("project", "map", "map_relative"), default=None,
+                    help="the lighting step the exported inverse network uses (default: the one it was trained with)")
     ex.set_defaults(handler=_export)
 
     _add_sky_stages(tsub)

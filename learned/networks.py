@@ -96,7 +96,7 @@ def _check_input(x: torch.Tensor, channels: int, name: str) -> None:
         raise ValueError(f"{name} must be a torch tensor of shape (B, {channels}, H, W), got {shape}")
 
 
-LIGHTING_SOLVES = ("project", "map")
+LIGHTING_SOLVES = ("project", "map", "map_relative")
 
 
 class InverseNet(nn.Module):

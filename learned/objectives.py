@@ -68,7 +68,8 @@ def solve_projected(image: torch.Tensor, albedo: torch.Tensor, normals: torch.Te
         method: ``"project"``: least squares (:func:`physrelight.image_model.solve_lighting`),
             then the orthogonal projection onto the subspace (the paper); ``"map"``: the most
             probable lighting in the subspace (:func:`physrelight.image_model.solve_lighting_map`,
-            ``noise=1``).
+            ``noise=1``); ``"map_relative"``: the same with the prior on the lighting's shape
+            only, its level fitted to the image (``relative=True``: exposure-equivariant).
 
     Returns:
         ``(solved, lighting)``, each ``(B, 9, 3)`` camera-frame radiance SH: the unconstrained
@@ -79,10 +80,11 @@ def solve_projected(image: torch.Tensor, albedo: torch.Tensor, normals: torch.Te
     solved = image_model.solve_lighting(image, albedo, normals, mask, shadow)
     if method == "project":
         return solved, prior.project(solved)
-    if method == "map":
-        lighting = image_model.solve_lighting_map(image, albedo, normals, mask, prior, shadow=shadow)
+    if method in ("map", "map_relative"):
+        lighting = image_model.solve_lighting_map(image, albedo, normals, mask, prior, shadow=shadow,
+                                                  relative=method == "map_relative")
         return solved, lighting.to(image.dtype)
-    raise ValueError(f"method must be 'project' or 'map', got {method!r}")
+    raise ValueError(f"method must be 'project', 'map' or 'map_relative', got {method!r}")
 
 
 def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Tensor,

@@ -161,8 +161,10 @@ def load_network(path: str | Path, kind: str) -> torch.nn.Module:
         tensors, meta = ckpt.load_weights(p)
         if meta.get("kind") != kind:
             raise ValueError(f"{str(p)!r} holds {meta.get('kind')!r} weights, not {kind!r} ones")
-        net = _build(kind, {"width": int(meta["width"]), "depth": int(meta["depth"]),
-                            **json.loads(meta.get("config", "{}"))})
+        cfg = {"width": int(meta["width"]), "depth": int(meta["depth"]), **json.loads(meta.get("config", "{}"))}
+        if "lighting_solve" in meta:  # chosen at export (train export --lighting-solve)
+            cfg["lighting_solve"] = meta["lighting_solve"]
+        net = _build(kind, cfg)
         net.load_state_dict(tensors)
     return net.eval()
 

@@ -231,7 +231,8 @@ def solve_lighting(image: Array, albedo: Array, normals: Array, mask: Array, sha
 
 
 def solve_lighting_map(image: Array, albedo: Array, normals: Array, mask: Array, prior: LightingPrior,
-                       shadow: Array | None = None, noise: float = 1.0, shadow_floor: float = 1e-3) -> Array:
+                       shadow: Array | None = None, noise: float = 1.0, shadow_floor: float = 1e-3,
+                       relative: bool = False) -> Array:
     """The most probable lighting under a lighting prior (MAP) that explains the image.
 
     The lighting is restricted to the prior's subspace, ``L = mean + C^T diag(scale) z``
@@ -249,6 +250,14 @@ def solve_lighting_map(image: Array, albedo: Array, normals: Array, mask: Array,
     halves (``docs/learned.md``). ``noise -> 0`` gives the least-squares fit inside the
     subspace; a large ``noise`` gives the prior's mean. Unlike :func:`solve_lighting` the result
     is not scale-equivariant: the prior has units (it was fitted in photo units).
+
+    ``relative=True`` frees the scale: ``L = t (mean + C^T diag(scale) z)`` with ``t`` the
+    least-squares level of the prior's mean lighting on this image (``t > 0``; floored at
+    1e-8), so the prior constrains the lighting's *shape* only. A photo's exposure is
+    arbitrary, and with the absolute prior a photo 3 stops under-exposed gets a lighting
+    pulled towards the prior's level and shape (the benchmark's dark-input stratum,
+    ``docs/bench.md``); the relative solve is exactly scale-equivariant: ``c * image`` gives
+    ``c * L``.
 
     Args:
         image, albedo: ``(B, 3, H, W)`` or ``(3, H, W)``; normals ``(B, 3, H, W)`` (frame of L);
@@ -275,7 +284,13 @@ def solve_lighting_map(image: Array, albedo: Array, normals: Array, mask: Array,
     mean = prior.mean.to(device=ata.device, dtype=f64)
     basis = prior.components.to(device=ata.device, dtype=f64) * prior.scale.to(device=ata.device, dtype=f64)[:, None]
     lam = (noise**2) * msq  # sigma^2 per image
-    lhs = basis @ gram @ basis.T + lam[:, None, None] * torch.eye(basis.shape[0], dtype=f64, device=ata.device)
-    z = torch.linalg.solve(lhs, ((rhs - (gram @ mean[:, None]).squeeze(-1)) @ basis.T)[..., None]).squeeze(-1)
-    out = (mean + z @ basis).reshape(nb, k, 3).to(dtype)
+    g_mean = (gram @ mean[:, None]).squeeze(-1)  # (B, D)
+    if relative:  # the level t of the mean that fits best; then the shape, around t * mean
+        t = ((rhs @ mean) / (g_mean @ mean).clamp_min(1e-30)).clamp_min(1e-8)
+    else:
+        t = torch.ones(nb, dtype=f64, device=ata.device)
+    eye = torch.eye(basis.shape[0], dtype=f64, device=ata.device)
+    lhs = t[:, None, None] ** 2 * (basis @ gram @ basis.T) + lam[:, None, None] * eye
+    z = torch.linalg.solve(lhs, (t[:, None] * ((rhs - t[:, None] * g_mean) @ basis.T))[..., None]).squeeze(-1)
+    out = (t[:, None] * (mean + z @ basis)).reshape(nb, k, 3).to(dtype)
     return restore(out[0] if unbatched else out)

@@ -209,3 +209,41 @@ def test_14_map_solve_is_the_stationary_point_of_its_objective_and_differentiabl
                                     (a_,))
     with pytest.raises(ValueError, match="noise"):
         image_model.solve_lighting_map(i, a, n, mask, prior, shadow=s, noise=0.0)
+
+
+def test_15_relative_map_solve_is_scale_equivariant_and_fits_the_prior_shape_at_any_exposure() -> None:
+    prior = _subspace_prior(k=6, seed=20)
+    n, a, s, light = random_scene(b=2, h=6, w=7, seed=8)
+    noise = torch.randn(2, 3, 6, 7, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+    i = image_model.render(a, n, light, s) * (1 + 0.1 * noise)
+    mask = torch.ones_like(s)
+    base = image_model.solve_lighting_map(i, a, n, mask, prior, shadow=s, noise=0.3, relative=True)
+    for c in (1 / 8, 5.0):  # an exposure change scales the lighting and nothing else
+        scaled = image_model.solve_lighting_map(c * i, a, n, mask, prior, shadow=s, noise=0.3, relative=True)
+        torch.testing.assert_close(scaled, c * base, atol=1e-12, rtol=1e-9)
+    absolute = image_model.solve_lighting_map(i / 8, a, n, mask, prior, shadow=s, noise=0.3)
+    assert not torch.allclose(absolute * 8, image_model.solve_lighting_map(i, a, n, mask, prior, shadow=s, noise=0.3))
+    # The prior's mean lighting photographed at any exposure comes back exactly (the level is
+    # the least-squares fit of the mean, the shape then needs no correction) ...
+    mean = prior.mean.reshape(1, 9, 3).expand(2, 9, 3)
+    for c in (0.125, 3.0):
+        photo = image_model.render(a, n, c * mean, s)
+        got = image_model.solve_lighting_map(photo, a, n, mask, prior, shadow=s, noise=0.3, relative=True)
+        torch.testing.assert_close(got, c * mean, atol=1e-10, rtol=1e-8)
+    # ... and the solution is the stationary point of the objective at that level.
+    target = i / s
+    basis = prior.components * prior.scale[:, None]
+    mean_img = a * image_model.shading(n, mean)
+    t = (target * mean_img).sum((1, 2, 3)) / (mean_img**2).sum((1, 2, 3))
+    z = ((base.reshape(2, 27) / t[:, None] - prior.mean) @ basis.T @ torch.linalg.inv(basis @ basis.T))
+    z = z.detach().requires_grad_(True)
+    lit = (t[:, None] * (prior.mean + z @ basis)).reshape(2, 9, 3)
+    sigma2 = 0.3**2 * (target**2).mean((1, 2, 3))
+    objective = (((target - a * image_model.shading(n, lit)) ** 2).sum((1, 2, 3)) + sigma2 * (z**2).sum(1)).sum()
+    (grad,) = torch.autograd.grad(objective, z)
+    assert float(grad.abs().max()) < 1e-8 * float(objective.detach())
+    torch.testing.assert_close(lit.detach(), base)
+    a_ = a[:1].clone().requires_grad_(True)
+    assert torch.autograd.gradcheck(
+        lambda al: image_model.solve_lighting_map(i[:1].detach(), al, n[:1], mask[:1], prior, s[:1], 0.3, relative=True),
+        (a_,))
