@@ -237,6 +237,12 @@ def test_08_exported_weights_load_offline_and_relight(tiny_dataset: Path, tiny_p
     for f in ("inverse.safetensors", "shadow.safetensors"):
         assert ckpt.load_weights(tmp_path / "by_step" / f)[0].keys() == ckpt.load_weights(dest / f)[0].keys()
     assert main(args + ["--shadow-step", "5", "--dest", str(tmp_path / "none")]) == 2
+    # --lighting-solve picks the lighting step the exported network runs (default: as trained).
+    from learned.train import load_inverse
+
+    assert main(args + ["--lighting-solve", "map_relative", "--dest", str(tmp_path / "rel")]) == 0
+    assert load_inverse(tmp_path / "rel" / "inverse.safetensors").lighting_solve == "map_relative"
+    assert load_inverse(dest / "inverse.safetensors").lighting_solve == "project"
 
 
 def test_09_the_shipped_weights_load_without_arguments() -> None:
@@ -379,3 +385,35 @@ def test_15_the_one_sided_mvs_stencil_supervises_more_pixels_with_the_same_norma
     assert t_o["normal"] != t_c["normal"] and t_o["appearance"] == t_c["appearance"]
     with pytest.raises(ValueError, match="mvs_stencil"):
         config(tiny_dataset, tmp_path / "x", tiny_prior, mvs_stencil="sobel")
+
+
+def test_16_exports_are_byte_reproducible_and_carry_a_chosen_lighting_step(tiny_dataset: Path, tiny_prior: Path,
+                                                                          tmp_path: Path) -> None:
+    from learned.objectives import decompose_and_solve
+    from learned.train import load_inverse
+    from physrelight import image_model
+
+    run = tmp_path / "map"
+    train(config(tiny_dataset, run, tiny_prior, steps=2, ckpt_every=2, val_every=2, lighting_solve="map"))
+    side = ckpt.latest_checkpoint(run)
+    # safetensors writes its metadata from a hash map: the header's key order used to change
+    # from one export to the next. Same checkpoint, same bytes now; mode as open() gives.
+    a = ckpt.export_weights(side, tmp_path / "a.safetensors", "inverse")
+    b = ckpt.export_weights(side, tmp_path / "b.safetensors", "inverse")
+    assert a.read_bytes() == b.read_bytes()
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (a.stat().st_mode & 0o777) == (0o666 & ~umask)
+    # The lighting step chosen at export travels with the weights and is the one used.
+    w = tmp_path / "w"
+    ckpt.export_weights(side, w / "inverse.safetensors", "inverse", extra={"lighting_solve": "map_relative"})
+    net = load_inverse(w / "inverse.safetensors")
+    assert net.lighting_solve == "map_relative" and load_inverse(a).lighting_solve == "map"
+    prior = LightingPrior.load(tiny_prior)
+    image = PairSampler(tiny_dataset, split="all", res=24).batch(1, 0).image
+    sky = torch.zeros(image.shape[0], 1, 24, 24, dtype=torch.bool)
+    with torch.no_grad():
+        out = decompose_and_solve(net, image, sky, prior)
+        expected = image_model.solve_lighting_map(image, out["albedo"], out["normals"], torch.ones_like(sky).float(),
+                                                  prior, shadow=out["shadow"], relative=True)
+    torch.testing.assert_close(out["lighting"], expected.float())
