@@ -141,7 +141,7 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="start from this run's latest checkpoint or exported weights of the same stage and "
                         "size (fine-tuning: a fresh optimizer; default: random initialisation)")
     p.add_argument("--loss-weight", action="append", metavar="NAME=VALUE",
-                   help="override a loss weight (appearance, albedo, normal, cross, prior, shadow)")
+                   help="override a loss weight (appearance, albedo, normal, cross, prior, shadow, normal_smooth)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

@@ -116,6 +116,8 @@ class TrainConfig(RunConfig):
     progress: bool = True
 
     def __post_init__(self) -> None:
+        # Runs recorded before a term existed ran without it (weight 0 = the default of any new term).
+        self.weights = {**LossWeights().as_dict(), **self.weights}
         if self.stage not in STAGES:
             raise ValueError(f"stage must be one of {STAGES}, got {self.stage!r}")
         self.check_common(("width", "depth", "res", "batch", "steps", "val_every", "val_images", "ckpt_every",
