@@ -7,6 +7,7 @@ tiny networks; the whole file takes about a minute on 2 cores.
 from __future__ import annotations
 
 import csv
+import math
 import json
 import os
 import shutil
@@ -417,3 +418,38 @@ def test_16_exports_are_byte_reproducible_and_carry_a_chosen_lighting_step(tiny_
         expected = image_model.solve_lighting_map(image, out["albedo"], out["normals"], torch.ones_like(sky).float(),
                                                   prior, shadow=out["shadow"], relative=True)
     torch.testing.assert_close(out["lighting"], expected.float())
+
+
+def test_17_edge_aware_smoothness_charges_normal_breaks_where_the_photo_is_smooth() -> None:
+    from learned.objectives import SMOOTHNESS_EDGE_GAIN, edge_aware_smoothness
+
+    h, w, k = 6, 8, 4
+    up = torch.tensor([0.0, 1.0, 0.0]).reshape(1, 3, 1, 1).expand(1, 3, h, w).clone()
+    fg = torch.ones(1, 1, h, w)
+    flat = torch.full((1, 3, h, w), 0.2**2.2)  # linear; display value 0.2
+    assert float(edge_aware_smoothness(up, flat, fg)) == 0.0  # constant normals cost nothing
+    broken = up.clone()
+    broken[:, :, :, k:] = torch.tensor([0.0, 0.0, 1.0]).reshape(1, 3, 1, 1)  # a crease between columns k-1, k
+    pairs = h * (w - 1) + (h - 1) * w
+    jump = 2.0  # |(0, 1, 0) - (0, 0, 1)|_1
+    torch.testing.assert_close(edge_aware_smoothness(broken, flat, fg), torch.tensor(h * jump / pairs))
+    # The same crease on an image edge (display values 0.2 -> 0.8) costs exp(-g 0.6) as much.
+    edge = flat.clone()
+    edge[:, :, :, k:] = 0.8**2.2
+    expected = h * jump * math.exp(-SMOOTHNESS_EDGE_GAIN * 0.6) / pairs
+    torch.testing.assert_close(edge_aware_smoothness(broken, edge, fg), torch.tensor(expected), rtol=1e-5, atol=1e-7)
+    # Only pairs with both pixels in the foreground count: a crease against the sky is free.
+    sky_right = fg.clone()
+    sky_right[:, :, :, k:] = 0.0
+    assert float(edge_aware_smoothness(broken, flat, sky_right)) == 0.0
+    n = broken.clone().requires_grad_(True)
+    edge_aware_smoothness(n, flat, fg).backward()
+    assert torch.isfinite(n.grad).all() and float(n.grad.abs().sum()) > 0
+
+
+def test_18_a_run_recorded_before_a_loss_term_existed_keeps_its_identity(tiny_dataset: Path, tiny_prior: Path,
+                                                                         tmp_path: Path) -> None:
+    new = config(tiny_dataset, tmp_path / "r", tiny_prior)
+    old_weights = {k: v for k, v in new.weights.items() if k != "normal_smooth"}
+    old = config(tiny_dataset, tmp_path / "r", tiny_prior, weights=old_weights)
+    assert old.weights["normal_smooth"] == 0.0 and old.identity() == new.identity()  # resumable
