@@ -122,7 +122,7 @@ def test_04_gradients_flow_through_the_lighting_solve_into_the_network(tiny_data
     solved.sum().backward()
     assert albedo.grad is not None and float(albedo.grad.abs().sum()) > 0
     assert all(p.grad is not None for p in net.parameters())
-    assert set(terms) == {"appearance", "albedo", "normal", "cross", "prior", "shadow"}
+    assert set(terms) == {"appearance", "albedo", "normal", "normal_smooth", "cross", "prior", "shadow"}
 
 
 def test_05_a_tiny_self_supervised_run_lowers_the_loss(tiny_dataset: Path, tiny_prior: Path, tmp_path: Path) -> None:
