@@ -65,7 +65,7 @@ def _config(args: argparse.Namespace, stage: str):
                        prior=args.prior, inverse=getattr(args, "inverse", None), init=args.init,
                        lighting_solve=getattr(args, "lighting_solve", "project"),
                        initial_shadow_logit=getattr(args, "initial_shadow_logit", 3.0),
-                       mvs_stencil=getattr(args, "mvs_stencil", "central"),
+                       mvs_stencil=getattr(args, "mvs_stencil", "central"), mirror=args.mirror,
                        weights=weights, progress=not args.quiet)
 
 
@@ -143,6 +143,12 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--loss-weight", action="append", metavar="NAME=VALUE",
                    help="override a loss weight (appearance, albedo, normal, cross, prior, shadow, normal_smooth)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _mirror(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--mirror", action="store_true",
+                   help="augment: mirror each photo pair left-right with probability 1/2 (scene, cameras and "
+                        "lighting mirrored together; learned.data.mirror_view)")
 
 
 def _train_sky_stage(args: argparse.Namespace) -> int:
@@ -310,6 +316,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     inv = tsub.add_parser("inverse", help="self-supervised inverse rendering network")
     _common(inv)
+    _mirror(inv)
     inv.add_argument("--lighting-solve", choices=("project", "map", "map_relative"), default="project",
                      help="lighting from the decomposition: least squares + orthogonal projection onto the prior's "
                           "subspace (the paper; default), the most probable lighting in the subspace (map), or the "
@@ -323,6 +330,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     sh = tsub.add_parser("shadow", help="ShadowNet on a trained inverse network")
     _common(sh)
+    _mirror(sh)
     sh.add_argument("--inverse", required=True, help="inverse run folder or exported weights")
     sh.set_defaults(handler=_train_shadow)
 

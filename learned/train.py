@@ -112,6 +112,7 @@ class TrainConfig(RunConfig):
     lighting_solve: str = "project"
     initial_shadow_logit: float = 3.0
     mvs_stencil: str = "central"
+    mirror: bool = False  # left-right mirrored pairs (learned.data.mirror_view); off in runs before it existed
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
 
@@ -133,6 +134,8 @@ class TrainConfig(RunConfig):
             raise ValueError(f"mvs_stencil must be one of {MVS_STENCILS}, got {self.mvs_stencil!r}")
         if self.init is not None and not Path(self.init).exists():
             raise ValueError(f"init {self.init!r} does not exist (a {self.stage} run folder or weights file)")
+        if not isinstance(self.mirror, bool):
+            raise ValueError(f"mirror must be True or False, got {self.mirror!r}")
 
 
 def build_inverse(width: int, depth: int, seed: int) -> InverseNet:
@@ -337,7 +340,8 @@ def train(config: TrainConfig) -> dict[str, Any]:
         (run / "panels").mkdir(parents=True, exist_ok=True)
     _barrier()
     prior = load_prior(config.prior)
-    sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed)
+    sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed,
+                          mirror=config.mirror)
     weights = LossWeights(**config.weights)
 
     torch.manual_seed(config.seed)

@@ -453,3 +453,55 @@ def test_18_a_run_recorded_before_a_loss_term_existed_keeps_its_identity(tiny_da
     old_weights = {k: v for k, v in new.weights.items() if k != "normal_smooth"}
     old = config(tiny_dataset, tmp_path / "r", tiny_prior, weights=old_weights)
     assert old.weights["normal_smooth"] == 0.0 and old.identity() == new.identity()  # resumable
+
+
+def test_19_a_mirrored_pair_is_the_mirror_image_of_the_pair_in_every_multi_view_term(tiny_dataset: Path,
+                                                                                     tiny_prior: Path,
+                                                                                     tmp_path: Path) -> None:
+    from learned.data import Batch, mirror_view, mvs_normals
+    from physrelight import camera, sh
+
+    plain = PairSampler(tiny_dataset, split="all", res=24)
+    batch = plain.batch(2, 0)
+    names = ("image", "depth", "sky", "K", "world_to_camera")
+    views = [mirror_view(*(getattr(batch, n)[i] for n in names)) for i in range(4)]
+    mirrored = Batch(*(torch.stack([v[k] for v in views]) for k in range(5)), keys=batch.keys)
+    flip_x = torch.tensor([-1.0, 1.0, 1.0])[None, :, None, None]
+
+    def partner_warp(b: Batch) -> tuple[torch.Tensor, torch.Tensor]:
+        rel = camera.relative_pose(b.world_to_camera, b.partner(b.world_to_camera))
+        return camera.warp(b.partner(b.image), b.depth, b.K, b.partner(b.K), rel, depth_src=b.partner(b.depth))
+
+    # Warping the mirrored partner gives the mirrored warp (same pixels valid, same values).
+    w0, v0 = partner_warp(batch)
+    w1, v1 = partner_warp(mirrored)
+    assert bool(v0.any()) and torch.equal(v0.flip(-1), v1)
+    torch.testing.assert_close(w1[v1.expand_as(w1)], w0.flip(-1)[v1.expand_as(w1)], atol=1e-4, rtol=0)
+    # MVS normals: the mirrored ones, x negated.
+    n0, ok0 = mvs_normals(batch)
+    n1, ok1 = mvs_normals(mirrored)
+    assert torch.equal(ok0.flip(-1), ok1)
+    torch.testing.assert_close(n1[ok1.expand_as(n1)], (n0.flip(-1) * flip_x)[ok1.expand_as(n1)], atol=1e-5, rtol=0)
+    # The lighting rotation between the views commutes with mirroring the SH (x-odd terms negated).
+    x_odd = torch.tensor([1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0, 1.0], dtype=torch.float64)[:, None]
+    light = torch.randn(9, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    R0 = camera.relative_pose(batch.partner(batch.world_to_camera), batch.world_to_camera)[:, :3, :3].double()
+    R1 = camera.relative_pose(mirrored.partner(mirrored.world_to_camera), mirrored.world_to_camera)[:, :3, :3].double()
+    for r0, r1 in zip(R0, R1):
+        assert abs(float(torch.linalg.det(r1)) - 1.0) < 1e-5  # still a proper rotation
+        torch.testing.assert_close(sh.rotation(r1, 2) @ (light * x_odd), (sh.rotation(r0, 2) @ light) * x_odd,
+                                   atol=1e-5, rtol=0)
+    # The sampler mirrors whole pairs, half of them, by its own seeded stream; the pairs do not change.
+    aug = PairSampler(tiny_dataset, split="all", res=24, mirror=True)
+    flips = [f for step in range(20) for f in aug.mirrored_pairs(2, step)]
+    assert 0 < sum(flips) < len(flips) and plain.mirrored_pairs(2, 0) == [False, False]
+    step = next(s for s in range(20) if aug.mirrored_pairs(2, s)[0])
+    a, p = aug.batch(2, step), plain.batch(2, step)
+    assert a.keys == p.keys and torch.equal(a.image[0], p.image[0].flip(-1)) and torch.equal(a.image[2], p.image[2].flip(-1))
+    assert torch.equal(aug.batch(2, step).image, a.image)
+    # Mirrored training runs and resumes like any other (the option is part of the run's identity).
+    cfg = config(tiny_dataset, tmp_path / "m", tiny_prior, mirror=True)
+    assert cfg.identity() != config(tiny_dataset, tmp_path / "m", tiny_prior).identity()
+    assert math.isfinite(train(cfg)["train_seconds"])
+    with pytest.raises(ValueError, match="mirror"):
+        config(tiny_dataset, tmp_path / "x", tiny_prior, mirror="yes")
