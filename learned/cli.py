@@ -112,8 +112,12 @@ def _export(args: argparse.Namespace) -> int:
     dest = Path(args.dest)
     for kind, run, step in (("inverse", args.inverse, args.inverse_step), ("shadow", args.shadow, args.shadow_step)):
         side = ckpt.checkpoint_at(run, step)
-        extra = {"lighting_solve": args.lighting_solve} if kind == "inverse" and args.lighting_solve else None
-        path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind, extra=extra)
+        extra = {}
+        if kind == "inverse" and args.lighting_solve:
+            extra["lighting_solve"] = args.lighting_solve
+        if kind == "inverse" and args.mirror_average:
+            extra["mirror_average"] = "1"
+        path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind, extra=extra or None)
         print(f"{kind}: {side} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
     return 0
 
@@ -353,6 +357,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ex.add_argument("--dest", default="learned/weights", help="destination folder (default: learned/weights)")
     ex.add_argument("--lighting-solve", choices=("project", "map", "map_relative"), default=None,
                     help="the lighting step the exported inverse network uses (default: the one it was trained with)")
+    ex.add_argument("--mirror-average", action="store_true",
+                    help="the exported inverse network averages each photo's layers with those of its mirror image "
+                         "(two passes; learned.networks.mirror_averaged)")
     ex.set_defaults(handler=_export)
 
     _add_sky_stages(tsub)

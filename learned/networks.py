@@ -23,7 +23,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-__all__ = ["UNet", "InverseNet", "ShadowNet", "count_parameters", "normalise_lighting", "tile_lighting"]
+__all__ = ["UNet", "InverseNet", "ShadowNet", "count_parameters", "mirror_averaged", "normalise_lighting",
+           "tile_lighting"]
 
 
 def _groups(channels: int) -> int:
@@ -114,16 +115,23 @@ class InverseNet(nn.Module):
             (3: s = 0.95, almost no shadow; the shipped network). A start deep in the sigmoid's
             flat end scales every gradient reaching ``s`` by ``sigmoid'`` (0.045 at 3), which the
             held-out runs found to matter (docs/learned.md).
+        mirror_average: at inference, decompose the photo and its left-right mirror image and
+            average (:func:`mirror_averaged`; :func:`learned.objectives.decompose_and_solve`
+            reads it). An inference choice like ``lighting_solve`` (chosen at export); training
+            never uses it.
     """
 
     def __init__(self, width: int = 16, depth: int = 3, lighting_solve: str = "project",
-                 initial_shadow_logit: float = 3.0) -> None:
+                 initial_shadow_logit: float = 3.0, mirror_average: bool = False) -> None:
         super().__init__()
         if lighting_solve not in LIGHTING_SOLVES:
             raise ValueError(f"lighting_solve must be one of {LIGHTING_SOLVES}, got {lighting_solve!r}")
         if not math.isfinite(initial_shadow_logit):
             raise ValueError(f"initial_shadow_logit must be finite, got {initial_shadow_logit!r}")
+        if not isinstance(mirror_average, bool):
+            raise ValueError(f"mirror_average must be True or False, got {mirror_average!r}")
         self.width, self.depth, self.lighting_solve = width, depth, lighting_solve
+        self.mirror_average = mirror_average
         self.unet = UNet(3, 7, width, depth)
         with torch.no_grad():
             # Start from a plausible decomposition: mid-grey albedo, camera-facing
@@ -142,6 +150,23 @@ class InverseNet(nn.Module):
         normals = raw / raw.norm(dim=1, keepdim=True)
         shadow = torch.sigmoid(out[:, 6:7])
         return {"albedo": albedo, "normals": normals, "shadow": shadow}
+
+
+def mirror_averaged(net: nn.Module, image: torch.Tensor) -> dict[str, torch.Tensor]:
+    """The mean of ``net``'s layers for ``image (B, 3, H, W)`` and for its left-right mirror image.
+
+    The mirrored photo shows the mirrored scene (:func:`learned.data.mirror_view`): its layers
+    are flipped back and its normals get ``n_x -> -n_x`` before averaging; the mean normal is
+    renormalised (its ``n_z`` stays > 0). Two network passes; a prediction that is not
+    mirror-symmetric has its asymmetric part cancelled. Returns ``{"albedo", "normals",
+    "shadow"}`` like :class:`InverseNet`.
+    """
+    a, m = net(image), net(image.flip(-1))
+    flip_x = torch.tensor([-1.0, 1.0, 1.0], dtype=image.dtype, device=image.device)[None, :, None, None]
+    normals = a["normals"] + m["normals"].flip(-1) * flip_x
+    return {"albedo": 0.5 * (a["albedo"] + m["albedo"].flip(-1)),
+            "normals": normals / normals.norm(dim=1, keepdim=True).clamp_min(1e-12),
+            "shadow": 0.5 * (a["shadow"] + m["shadow"].flip(-1))}
 
 
 def normalise_lighting(lighting: torch.Tensor) -> torch.Tensor:

@@ -39,6 +39,7 @@ from physrelight import camera, image_model, losses
 from physrelight.lighting_prior import LightingPrior
 
 from .data import Batch, mvs_normals
+from .networks import mirror_averaged
 
 __all__ = ["LossWeights", "SMOOTHNESS_EDGE_GAIN", "decompose_and_solve", "edge_aware_smoothness", "inverse_losses",
            "solve_projected"]
@@ -120,21 +121,27 @@ def solve_projected(image: torch.Tensor, albedo: torch.Tensor, normals: torch.Te
 
 
 def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Tensor,
-                        prior: LightingPrior) -> dict[str, torch.Tensor]:
+                        prior: LightingPrior, mirror_average: bool | None = None) -> dict[str, torch.Tensor]:
     """Run the network and solve each photo's lighting.
 
     Args:
         net: an :class:`learned.networks.InverseNet` (or a DDP wrapper of one).
         image: ``(B, 3, H, W)`` linear photos; sky ``(B, 1, H, W)`` bool.
+        mirror_average: average the layers of the photo and its mirror image before the solve
+            (:func:`learned.networks.mirror_averaged`); None = the network's own
+            ``mirror_average`` (an inference choice made at export). Training passes False.
 
     Returns:
         ``albedo, normals, shadow`` as the network gives them, ``lighting_solved`` and
         ``lighting`` (in the prior's subspace, by the network's ``lighting_solve``) ``(B, 9, 3)``,
         ``foreground`` ``(B, 1, H, W)`` float.
     """
-    out = dict(net(image))
+    module = getattr(net, "module", net)  # DDP wraps the network
+    if mirror_average is None:
+        mirror_average = getattr(module, "mirror_average", False)
+    out = dict(mirror_averaged(net, image) if mirror_average else net(image))
     fg = (~sky).to(image.dtype)
-    method = getattr(getattr(net, "module", net), "lighting_solve", "project")  # DDP wraps the network
+    method = getattr(module, "lighting_solve", "project")
     out["lighting_solved"], out["lighting"] = solve_projected(image, out["albedo"], out["normals"], out["shadow"],
                                                               fg, prior, method)
     out["foreground"] = fg
@@ -174,7 +181,7 @@ def inverse_losses(net: torch.nn.Module, batch: Batch, prior: LightingPrior,
         float, and the decomposition (see :func:`decompose_and_solve`).
     """
     image, sky = batch.image, batch.sky
-    out = decompose_and_solve(net, image, sky, prior)
+    out = decompose_and_solve(net, image, sky, prior, mirror_average=False)
     fg = out["foreground"]
     albedo, normals, shadow = out["albedo"], out["normals"], out["shadow"]
 

@@ -169,6 +169,8 @@ def load_network(path: str | Path, kind: str) -> torch.nn.Module:
         cfg = {"width": int(meta["width"]), "depth": int(meta["depth"]), **json.loads(meta.get("config", "{}"))}
         if "lighting_solve" in meta:  # chosen at export (train export --lighting-solve)
             cfg["lighting_solve"] = meta["lighting_solve"]
+        if "mirror_average" in meta:  # chosen at export (train export --mirror-average)
+            cfg["mirror_average"] = meta["mirror_average"] == "1"
         net = _build(kind, cfg)
         net.load_state_dict(tensors)
     return net.eval()
@@ -177,7 +179,8 @@ def load_network(path: str | Path, kind: str) -> torch.nn.Module:
 def _build(kind: str, cfg: dict[str, Any]) -> torch.nn.Module:
     """An untrained network of a run's configuration (runs before ``lighting_solve`` existed: project)."""
     if kind == "inverse":
-        return InverseNet(int(cfg["width"]), int(cfg["depth"]), cfg.get("lighting_solve", "project"))
+        return InverseNet(int(cfg["width"]), int(cfg["depth"]), cfg.get("lighting_solve", "project"),
+                          mirror_average=bool(cfg.get("mirror_average", False)))
     return ShadowNet(int(cfg["width"]), int(cfg["depth"]))
 
 

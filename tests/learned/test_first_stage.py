@@ -244,6 +244,10 @@ def test_08_exported_weights_load_offline_and_relight(tiny_dataset: Path, tiny_p
     assert main(args + ["--lighting-solve", "map_relative", "--dest", str(tmp_path / "rel")]) == 0
     assert load_inverse(tmp_path / "rel" / "inverse.safetensors").lighting_solve == "map_relative"
     assert load_inverse(dest / "inverse.safetensors").lighting_solve == "project"
+    # --mirror-average: the exported network averages each photo with its mirror image (test_20).
+    assert main(args + ["--mirror-average", "--dest", str(tmp_path / "mir")]) == 0
+    assert load_inverse(tmp_path / "mir" / "inverse.safetensors").mirror_average
+    assert not load_inverse(dest / "inverse.safetensors").mirror_average
 
 
 def test_09_the_shipped_weights_load_without_arguments() -> None:
@@ -505,3 +509,46 @@ def test_19_a_mirrored_pair_is_the_mirror_image_of_the_pair_in_every_multi_view_
     assert math.isfinite(train(cfg)["train_seconds"])
     with pytest.raises(ValueError, match="mirror"):
         config(tiny_dataset, tmp_path / "x", tiny_prior, mirror="yes")
+
+
+def test_20_mirror_averaging_is_exactly_mirror_symmetric_and_travels_with_the_export(tiny_dataset: Path,
+                                                                                     tiny_prior: Path,
+                                                                                     tmp_path: Path) -> None:
+    from learned.networks import mirror_averaged
+    from learned.objectives import decompose_and_solve
+    from learned.train import load_inverse
+
+    torch.manual_seed(0)
+    net = InverseNet(4, 2).eval()
+    image = PairSampler(tiny_dataset, split="all", res=24).batch(2, 0).image
+    flip_x = torch.tensor([-1.0, 1.0, 1.0])[None, :, None, None]
+    with torch.no_grad():
+        plain, mean, of_mirror = net(image), mirror_averaged(net, image), mirror_averaged(net, image.flip(-1))
+    # The averaged decomposition of the mirror image is the mirror image of the averaged one
+    # (the plain network's is not: it has no reason to be symmetric).
+    torch.testing.assert_close(of_mirror["albedo"], mean["albedo"].flip(-1), atol=1e-6, rtol=0)
+    torch.testing.assert_close(of_mirror["shadow"], mean["shadow"].flip(-1), atol=1e-6, rtol=0)
+    torch.testing.assert_close(of_mirror["normals"], mean["normals"].flip(-1) * flip_x, atol=1e-6, rtol=0)
+    assert float((plain["albedo"] - mean["albedo"]).abs().max()) > 1e-4
+    n = mean["normals"]
+    assert torch.allclose(n.norm(dim=1), torch.ones(()), atol=1e-5) and bool((n[:, 2] > 0).all())
+    # Chosen at export; the default export keeps single-pass inference; training never averages.
+    run = tmp_path / "r"
+    train(config(tiny_dataset, run, tiny_prior, steps=2, ckpt_every=2, val_every=2))
+    side = ckpt.latest_checkpoint(run)
+    ckpt.export_weights(side, tmp_path / "a.safetensors", "inverse")
+    ckpt.export_weights(side, tmp_path / "m.safetensors", "inverse", extra={"mirror_average": "1"})
+    single, averaged = load_inverse(tmp_path / "a.safetensors"), load_inverse(tmp_path / "m.safetensors")
+    assert not single.mirror_average and averaged.mirror_average
+    prior = LightingPrior.load(tiny_prior)
+    sky = torch.zeros(image.shape[0], 1, 24, 24, dtype=torch.bool)
+    with torch.no_grad():
+        a = decompose_and_solve(averaged, image, sky, prior)
+        b = decompose_and_solve(single, image, sky, prior, mirror_average=True)
+        c = decompose_and_solve(averaged, image, sky, prior, mirror_average=False)
+        d = decompose_and_solve(single, image, sky, prior)
+    torch.testing.assert_close(a["lighting"], b["lighting"])
+    torch.testing.assert_close(c["normals"], d["normals"])
+    assert not torch.allclose(a["normals"], d["normals"])
+    with pytest.raises(ValueError, match="mirror_average"):
+        InverseNet(4, 2, mirror_average="yes")
