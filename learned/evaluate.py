@@ -8,7 +8,11 @@ Metrics, each next to a trivial baseline:
   Baseline: the linearised photo as albedo. Reference (``oracle_albedo_si_mse``): the photo
   divided by its true shading and true direct-light ratio, ``i / (s shading(n; L))`` clipped to
   [0, 1]: what the image model itself allows, given a perfect decomposition of everything else
-  (clipping, noise, JPEG, interreflections and the order-2 truncation remain).
+  (clipping, noise, JPEG, interreflections and the order-2 truncation remain). Where the
+  network's albedo error comes from, a ladder of image-model albedos ``i / (s shading(n; L))``
+  clipped to [0, 1]: from the network's own ``n, L, s`` (``implied_albedo_si_mse``), with the
+  true lighting in place of its own (``..._true_lighting``), with true lighting and normals
+  (``..._true_normals_lighting``), and with everything true (the reference above).
 * **normal MAE**: mean angular error in degrees over foreground pixels (mean per image,
   then over images). Baseline: the camera-facing constant ``(0, 0, 1)``. Where it fails:
   the median over all foreground pixels, and the MAE split by whether the MVS-like depth
@@ -164,7 +168,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         < 0.5), ``shadow_ap_direct`` (labels: direct-light ratio < 0.5),
         ``lighting_rel_err``, ``lighting_si_rel_err``, ``lighting_shading_err`` (and
         ``oracle_lighting_shading_err``, ``oracle_map_lighting_shading_err``), ``oracle_albedo_si_mse``,
-        ``oracle_shadow_ap``, ``oracle_lighting_si_rel_err``, the same with ``baseline_``
+        ``oracle_shadow_ap``, ``oracle_lighting_si_rel_err``, ``implied_albedo_si_mse`` (and
+        ``_true_lighting``, ``_true_normals_lighting``), the same with ``baseline_``
         prefixed, ``shadow_positive_rate``, ``images``.
     """
     ds = SynthDataset(root, split=split, mode="full")
@@ -180,7 +185,9 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         "baseline_normal_mae_deg", "baseline_lighting_rel_err", "baseline_lighting_si_rel_err")}
     for key in ("normal_mae_deg_mvs", "normal_mae_deg_no_mvs", "normal_mae_deg_up", "normal_mae_deg_not_up",
                 "lighting_shading_err", "baseline_lighting_shading_err", "oracle_lighting_shading_err",
-                "oracle_map_lighting_shading_err", "oracle_lighting_si_rel_err", "oracle_albedo_si_mse"):
+                "oracle_map_lighting_shading_err", "oracle_lighting_si_rel_err", "oracle_albedo_si_mse",
+                "implied_albedo_si_mse", "implied_albedo_si_mse_true_lighting",
+                "implied_albedo_si_mse_true_normals_lighting"):
         acc[key] = []
     angles: list[np.ndarray] = []
     scores, scores_sn, scores_oracle, labels, labels_direct = [], [], [], [], []
@@ -203,6 +210,14 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
             true_shading = image_model.shading(true_normal[None], gt["lighting"].double()[None])[0]
             ceiling = (image[j].double() / (true_shading * gt["direct_shadow"].double()).clamp_min(1e-4)).clamp(0, 1)
             acc["oracle_albedo_si_mse"].append(si_mse(ceiling.float(), gt["albedo"], fg))
+            net_n, net_s = out["normals"][j:j + 1].double(), out["shadow"][j].double()
+            for key, shading_ in (
+                    ("implied_albedo_si_mse", image_model.shading(net_n, out["lighting"][j].double()[None])[0]),
+                    ("implied_albedo_si_mse_true_lighting",
+                     image_model.shading(net_n, gt["lighting"].double()[None])[0]),
+                    ("implied_albedo_si_mse_true_normals_lighting", true_shading)):
+                implied_albedo = (image[j].double() / (shading_ * net_s).clamp_min(1e-4)).clamp(0, 1)
+                acc[key].append(si_mse(implied_albedo.float(), gt["albedo"], fg))
             implied = (image[j].double() / (gt["albedo"].double() * true_shading).clamp_min(1e-4)).mean(0, keepdim=True)
             scores_oracle.append((1.0 - implied[fg]).numpy())
             angle = _angle_map_deg(out["normals"][j], gt["normal"])  # once; every normal figure reads it

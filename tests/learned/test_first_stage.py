@@ -135,7 +135,8 @@ def test_05_a_tiny_self_supervised_run_lowers_the_loss(tiny_dataset: Path, tiny_
     assert total[-10:].mean() < 0.7 * total[:10].mean()
     for key in ("albedo_si_mse", "normal_mae_deg", "normal_median_deg", "shadow_ap", "lighting_rel_err",
                 "lighting_shading_err", "oracle_lighting_shading_err", "oracle_map_lighting_shading_err",
-                "oracle_albedo_si_mse", "oracle_shadow_ap", "baseline_albedo_si_mse"):
+                "oracle_albedo_si_mse", "oracle_shadow_ap", "baseline_albedo_si_mse", "implied_albedo_si_mse",
+                "implied_albedo_si_mse_true_lighting", "implied_albedo_si_mse_true_normals_lighting"):
         assert np.isfinite(result["val"][key]), key
     assert (tmp_path / "run" / "panels" / "step_0000040.png").is_file()
     assert list((tmp_path / "run" / "tb").iterdir())  # TensorBoard events
@@ -552,3 +553,32 @@ def test_20_mirror_averaging_is_exactly_mirror_symmetric_and_travels_with_the_ex
     assert not torch.allclose(a["normals"], d["normals"])
     with pytest.raises(ValueError, match="mirror_average"):
         InverseNet(4, 2, mirror_average="yes")
+
+
+def test_21_a_perfect_decomposition_scores_zero_and_its_albedo_ladder_meets_the_reference(tiny_dataset: Path,
+                                                                                         tiny_prior: Path) -> None:
+    from learned.evaluate import evaluate, load_ground_truth
+    from synth.dataset import SynthDataset
+
+    ds = SynthDataset(tiny_dataset, split="all", mode="full")
+    queue = list(ds.items)
+
+    def truth(image: torch.Tensor, sky: torch.Tensor) -> dict[str, torch.Tensor]:
+        gts = [load_ground_truth(ds, it.scene, it.view, it.light, 24) for it in queue[:image.shape[0]]]
+        del queue[:image.shape[0]]
+        normals = torch.stack([g["normal"] for g in gts])
+        facing = torch.tensor([0.0, 0.0, 1.0])[:, None, None]  # sky pixels: any unit normal
+        normals = torch.where(normals.norm(dim=1, keepdim=True) > 0.5, normals, facing)
+        return {"albedo": torch.stack([g["albedo"] for g in gts]), "normals": normals / normals.norm(dim=1, keepdim=True),
+                "shadow": torch.stack([g["direct_shadow"] for g in gts]),
+                "lighting": torch.stack([g["lighting"] for g in gts]).float()}
+
+    m = evaluate(truth, tiny_dataset, "all", 24, LightingPrior.load(tiny_prior), batch_size=3)
+    assert not queue and m["albedo_si_mse"] < 1e-12 and m["normal_mae_deg"] < 0.05
+    assert m["lighting_rel_err"] < 1e-6 and m["lighting_shading_err"] < 1e-6
+    # Each rung of the ladder swaps in one more true layer; with all of them true (the network's
+    # shadow is the true direct-light ratio here) every rung is the reference.
+    for key in ("implied_albedo_si_mse", "implied_albedo_si_mse_true_lighting",
+                "implied_albedo_si_mse_true_normals_lighting"):
+        assert m[key] == pytest.approx(m["oracle_albedo_si_mse"], rel=1e-4), key
+    assert m["oracle_albedo_si_mse"] < m["baseline_albedo_si_mse"]
