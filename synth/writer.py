@@ -23,7 +23,10 @@ A scene is rendered into ``OUT/.scene_0000.partial`` and renamed when complete, 
 killed run loses at most the scene in progress and never leaves a half-written scene
 looking finished; a restarted run skips finished scenes. The same configuration gives the
 same bytes in every file but ``timing.json``. Shards (``i/n``) take scenes ``i, i+n, ...``
-so several machines can render one dataset into one folder.
+so several machines can render one dataset into one folder. A scene depends on the
+configuration and its index only, not on how many scenes there are (``scene.json`` records
+the configuration without ``scenes``), so a dataset can grow: the same arguments with a
+larger ``--scenes`` render the new scenes into the same folder.
 """
 
 from __future__ import annotations
@@ -84,6 +87,12 @@ class SynthConfig:
         d["kinds"] = list(self.kinds)
         return d
 
+    def scene_json(self) -> dict:
+        """What every scene records of the configuration: all of it but the scene count."""
+        d = self.to_json()
+        del d["scenes"]
+        return d
+
 
 def scene_name(index: int) -> str:
     return f"scene_{index:04d}"
@@ -111,7 +120,7 @@ def shard_scenes(config: SynthConfig, shard: tuple[int, int] = (0, 1)) -> list[i
 
 
 def _check_manifest(out: Path, config: SynthConfig) -> None:
-    """Create the manifest, or refuse to mix configurations in one folder."""
+    """Create the manifest, grow it to more scenes, or refuse to mix configurations in one folder."""
     path = out / "manifest.json"
     want = {"format": FORMAT, "version": VERSION, "config": config.to_json()}
     if path.exists():
@@ -119,12 +128,17 @@ def _check_manifest(out: Path, config: SynthConfig) -> None:
         if have.get("format") != FORMAT or have.get("version") != VERSION:
             raise ValueError(f"{str(out)!r} holds a {have.get('format')!r} v{have.get('version')} folder, "
                              f"not {FORMAT} v{VERSION}")
-        if have.get("config") != want["config"]:
-            diff = sorted(k for k in want["config"] if have.get("config", {}).get(k) != want["config"][k])
+        old = have.get("config", {})
+        if old == want["config"]:
+            return
+        diff = sorted(k for k in want["config"] if old.get(k) != want["config"][k])
+        if diff != ["scenes"]:
             raise ValueError(f"{str(out)!r} was made with different arguments ({', '.join(diff)}); "
                              "use another folder or the same arguments")
-        return
-    io.write_json(path, want)
+        if config.scenes < int(old["scenes"]):
+            raise ValueError(f"{str(out)!r} holds a dataset of {old['scenes']} scenes; --scenes {config.scenes} "
+                             "would not describe it (a dataset can grow, not shrink)")
+    io.write_json(path, want)  # new, or grown: the scenes it already has are those of the larger one
 
 
 def write_dataset(out: str | Path, config: SynthConfig, shard: tuple[int, int] = (0, 1),
@@ -186,7 +200,7 @@ def write_scene(root: Path, index: int, config: SynthConfig, on_unit=lambda: Non
 
     record: dict = {
         "format": FORMAT, "version": VERSION, "index": index, "seed": seed, "scene": spec.describe(),
-        "config": config.to_json(),
+        "config": config.scene_json(),
         "views": [{"K": np.asarray(v.K, dtype=np.float64), "world_to_camera": w2c[i], "width": v.width,
                    "height": v.height} for i, v in enumerate(views)],
         "lights": [], "photos": [[None] * config.lights for _ in views],

@@ -137,3 +137,15 @@ def test_09_command_line_errors_are_one_line(tmp_path: Path) -> None:
                          capture_output=True, text=True)
     assert res.returncode != 0 and "Traceback" not in res.stderr
     assert res.stderr.strip().count("\n") == 0 and "shard" in res.stderr
+
+
+def test_10_a_dataset_grows_to_the_bytes_of_the_larger_one_and_never_shrinks(dataset: Path, tmp_path: Path) -> None:
+    writer.write_dataset(tmp_path, writer.SynthConfig(**{**TINY, "scenes": 1}), progress=False)
+    first = (tmp_path / "scene_0000" / "scene.json").stat().st_mtime_ns
+    summary = writer.write_dataset(tmp_path, writer.SynthConfig(**TINY), progress=False)  # 1 -> 2 scenes
+    assert summary == {**summary, "skipped": ["scene_0000"], "rendered": ["scene_0001"]}
+    assert (tmp_path / "scene_0000" / "scene.json").stat().st_mtime_ns == first
+    assert digest(tmp_path) == digest(dataset)  # manifest included: as if rendered at 2 scenes
+    assert "scenes" not in io.read_json(tmp_path / "scene_0000" / "scene.json")["config"]
+    with pytest.raises(ValueError, match="grow, not shrink"):
+        writer.write_dataset(tmp_path, writer.SynthConfig(**{**TINY, "scenes": 1}), progress=False)
