@@ -7,7 +7,9 @@ export the run's last checkpoint with the shipped ShadowNet and prior and the li
 held-out dataset and on photos of the run's own training scenes (``--train-images`` of its
 ``train`` split): the gap between the two is what the network memorised. Writes
 ``OUT.json`` (every metric of every evaluation) and ``OUT.png`` (normal error, albedo si-MSE and
-shadow AP against the scene count, with the trivial baselines and the issue's goals).
+shadow AP against the scene count, with the trivial baselines and the issue's goals). ``OUT.json``
+is rewritten atomically after each run; a run already in it at the same checkpoint step is not
+evaluated again (re-run to resume, or to add a run).
 
     .venv/bin/python scripts/learned_data_scaling_chart.py --heldout data/heldout \
         --runs 160=runs/inv_b_train160_mirror 640=runs/inv_a_train640_mirror \
@@ -26,6 +28,7 @@ import torch
 from learned import checkpoint as ckpt
 from learned.evaluate import evaluate
 from learned.relighter import WEIGHTS_DIR, Relighter
+from physrelight.io import atomic_path, write_json
 
 GOALS = {"normal_mae_deg": 20.0}  # and albedo: 2x better than the photo (drawn per point)
 
@@ -79,7 +82,8 @@ def chart(results: dict[str, dict], path: Path) -> None:
     axes[1].legend(fontsize=7)
     axes[2].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_path(path, ".png") as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
 
 
 def main() -> None:
@@ -91,30 +95,39 @@ def main() -> None:
     ap.add_argument("--out", required=True, help="output path without extension (.json and .png are written)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    results: dict[str, dict] = {}
+    out = Path(args.out)
+    out_json = out.with_suffix(".json")
+    results: dict[str, dict] = json.loads(out_json.read_text()) if out_json.is_file() else {}
     for item in args.runs:
         scenes, _, run = item.partition("=")
         if not scenes.isdigit() or not run:
             raise SystemExit(f"--runs takes SCENES=RUN, got {item!r}")
         run_path = Path(run)
+        try:
+            side = ckpt.checkpoint_at(run_path)
+        except ValueError as e:
+            raise SystemExit(str(e)) from None
+        step = json.loads(side.read_text())["step"]
+        old = results.get(scenes)
+        if old is not None and old.get("run") == run and old.get("step") == step:
+            print(f"{scenes} scenes ({run}, step {step}): already measured in {out_json}", flush=True)
+            continue
         data = json.loads((run_path / "config.json").read_text())["data"]
         with tempfile.TemporaryDirectory() as tmp:
             plain = export(run_path, Path(tmp) / "plain", False)
             mirrored = export(run_path, Path(tmp) / "mirror", True)
             results[scenes] = {
-                "run": run, "data": data,
+                "run": run, "data": data, "step": step,
                 "heldout": measure(plain, args.heldout, "all", None),
                 "heldout_mirror_average": measure(mirrored, args.heldout, "all", None),
                 "train_scenes": measure(plain, data, "train", args.train_images),
             }
+        write_json(out_json, results)
         r = results[scenes]
         print(f"{scenes} scenes ({run}): held-out normals {r['heldout']['normal_mae_deg']:.2f} deg "
               f"(mirror-averaged {r['heldout_mirror_average']['normal_mae_deg']:.2f}, training scenes "
               f"{r['train_scenes']['normal_mae_deg']:.2f}), albedo {r['heldout']['albedo_si_mse']:.4f}, "
               f"shadow AP {r['heldout']['shadow_ap']:.3f}", flush=True)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
     chart(results, out.with_suffix(".png"))
 
 
