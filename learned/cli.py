@@ -265,8 +265,11 @@ def _evaluate_relight(args: argparse.Namespace) -> int:
     pipe = Relighter.load(args.weights, args.renderer)
     if pipe.renderer is None:
         print("note: no renderer weights found; 'proposed' falls back to shadownet_lambertian")
+    reference = None
+    if args.reference_weights is not None:
+        reference = Relighter.load(args.reference_weights).relight_linear
     result = evaluate_relight(pipe.relight_linear, args.data, args.split, args.res, args.max_cases,
-                              progress=not args.quiet)
+                              progress=not args.quiet, reference=reference)
     print(format_table(result))
     _write_json(args.json, result)
     return 0
@@ -306,6 +309,9 @@ def _add_renderer_stages(tsub: argparse._SubParsersAction) -> None:
     ev.add_argument("--renderer", default=None, help="renderer weights (default: <weights>/renderer.safetensors)")
     ev.add_argument("--res", type=positive_int, default=64, help="resolution the pipeline runs at (default: 64)")
     ev.add_argument("--max-cases", type=positive_int, default=None, help="at most this many (source, target) cases")
+    ev.add_argument("--reference-weights", default=None, metavar="FOLDER",
+                    help="a second weights folder: its 'proposed' is scored as 'reference' on the same cases and "
+                         "compared with a paired scene-bootstrap interval")
     ev.add_argument("--threads", type=positive_int, default=1)
     ev.add_argument("--json", default=None, help="also write the metrics here")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -21,7 +21,9 @@ The protocol (shared with the benchmark):
 Methods: ``proposed`` (decomposition + ShadowNet + neural renderer), ``lambertian_sh``
 (``albedo * shading(n; target)``, the InverseRenderNet-style relighting),
 ``shadownet_lambertian`` (times ShadowNet's target shadow) and ``identity`` (the source
-photo unchanged: what doing nothing scores).
+photo unchanged: what doing nothing scores). Optionally ``reference``: the ``proposed`` of a
+second pipeline (another weights folder) on the same cases, so that two pipelines are compared
+case by case with the same interval (``train evaluate-relight --reference-weights``).
 
 The relighting itself goes through one callable with the signature of
 :meth:`learned.Relighter.relight_linear` ``(image, sky, target, source_lighting, method)``
@@ -93,7 +95,7 @@ def _scores(pred: torch.Tensor, target: torch.Tensor, fg: torch.Tensor) -> dict[
 
 def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res: int = 64,
                      max_cases: int | None = None, methods: tuple[str, ...] = METHODS, batch_size: int = 16,
-                     progress: bool = False) -> dict[str, dict[str, float] | float]:
+                     progress: bool = False, reference: Relight | None = None) -> dict[str, dict[str, float] | float]:
     """Relighting metrics of each method over the held-out cases.
 
     Args:
@@ -103,6 +105,8 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
         res: resolution the pipeline runs at (the inverse network's, 64).
         max_cases: at most this many cases, evenly spread; None = all.
         methods: among :data:`METHODS`.
+        reference: a second pipeline's relight callable (same signature); its ``proposed`` is
+            scored as the method ``"reference"``. None: no comparison.
 
     Returns:
         ``{method: {"l1", "ssim", "psnr", "ciede2000"}, "cases": n}`` (means over cases;
@@ -120,7 +124,10 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
     if max_cases is not None and len(cases) > max_cases:
         idx = np.linspace(0, len(cases) - 1, max_cases).round().astype(int)
         cases = [cases[i] for i in idx]
-    acc: dict[str, dict[str, list[np.ndarray]]] = {m: {} for m in methods}
+    pipelines = {m: (relight, m) for m in methods}
+    if reference is not None:
+        pipelines["reference"] = (reference, "proposed")
+    acc: dict[str, dict[str, list[np.ndarray]]] = {m: {} for m in pipelines}
     scenes: list[str] = []
     count = 0
     from tqdm import tqdm
@@ -137,29 +144,29 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
             continue
         batch = {k: torch.stack([c[k] for c in loaded]) for k in loaded[0]}
         count += len(loaded)
-        for m in methods:
-            if m == "identity":
+        for m, (fn, method) in pipelines.items():
+            if method == "identity":
                 pred = colour.to_ldr(batch["image"])
             else:
                 with torch.no_grad():
-                    out = relight(batch["image"], batch["sky"], batch["target_sh"], batch["source_sh"], m)
+                    out = fn(batch["image"], batch["sky"], batch["target_sh"], batch["source_sh"], method)
                 pred = colour.to_ldr(out["relit"].clamp_min(0))
             for k, v in _scores(pred, batch["target_ldr"], batch["fg"]).items():
                 acc[m].setdefault(k, []).append(v)
-    per_case = {m: {k: np.concatenate(v) for k, v in acc[m].items()} for m in methods}
-    result: dict[str, dict | float] = {m: {k: float(np.mean(v)) for k, v in per_case[m].items()} for m in methods}
+    per_case = {m: {k: np.concatenate(v) for k, v in acc[m].items()} for m in pipelines}
+    result: dict[str, dict | float] = {m: {k: float(np.mean(v)) for k, v in per_case[m].items()} for m in pipelines}
     result["cases"] = float(count)
     if "proposed" in methods and count:
         result["paired"] = {m: {k: paired_bootstrap(per_case["proposed"][k], v, groups=scenes)._asdict()
                                 for k, v in per_case[m].items()}
-                            for m in methods if m != "proposed"}
+                            for m in pipelines if m != "proposed"}
     return result
 
 
 def format_table(result: dict) -> str:
     """A markdown table of :func:`evaluate_relight`'s result."""
     lines = ["| method | l1 | SSIM | PSNR dB | CIEDE2000 |", "| --- | --- | --- | --- | --- |"]
-    for m in METHODS:
+    for m in (*METHODS, "reference"):
         if m in result:
             v = result[m]
             lines.append(f"| {m} | {v['l1']:.4f} | {v['ssim']:.4f} | {v['psnr']:.2f} | {v['ciede2000']:.2f} |")
@@ -174,4 +181,4 @@ def format_table(result: dict) -> str:
 
 def finite(result: dict) -> bool:
     """True when every metric of every method is finite."""
-    return all(math.isfinite(x) for m in METHODS if m in result for x in result[m].values())
+    return all(math.isfinite(x) for m in (*METHODS, "reference") if m in result for x in result[m].values())

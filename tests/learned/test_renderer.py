@@ -8,6 +8,7 @@ here, so the tests do not depend on the shipped weights.
 from __future__ import annotations
 
 import csv
+import json
 import shutil
 from pathlib import Path
 
@@ -257,3 +258,27 @@ def test_08_exported_weights_round_trip_and_plug_into_the_pipeline(tiny_dataset:
             p = result["paired"][m][k]
             assert p["diff"] == pytest.approx(result["proposed"][k] - result[m][k], abs=1e-4), (m, k)  # float32 scores
             assert p["lo"] <= p["diff"] <= p["hi"]
+
+
+def test_09_a_reference_pipeline_is_scored_on_the_same_cases_and_paired(tiny_dataset: Path, frozen: Path,
+                                                                        tmp_path: Path) -> None:
+    pipe = Relighter.load(frozen)
+
+    def as_lambertian(image, sky, target, source, method):  # a "second pipeline" whose proposed is lambertian_sh
+        return pipe.relight_linear(image, sky, target, source, "lambertian_sh")
+
+    result = evaluate_relight(pipe.relight_linear, tiny_dataset, "all", 24, max_cases=4, reference=as_lambertian)
+    assert result["reference"] == result["lambertian_sh"]
+    assert result["paired"]["reference"] == result["paired"]["lambertian_sh"]
+    same = evaluate_relight(pipe.relight_linear, tiny_dataset, "all", 24, max_cases=4, reference=pipe.relight_linear)
+    for k in ("l1", "ssim", "psnr", "ciede2000"):
+        assert same["paired"]["reference"][k]["diff"] == 0.0
+        assert same["paired"]["reference"][k]["lo"] == same["paired"]["reference"][k]["hi"] == 0.0
+    from physrelight.cli import main
+
+    out = tmp_path / "r.json"
+    assert main(["train", "evaluate-relight", "--data", str(tiny_dataset), "--weights", str(frozen), "--max-cases",
+                 "4", "--res", "24", "--quiet", "--reference-weights", str(frozen), "--json", str(out)]) == 0
+    assert "reference" in json.loads(out.read_text())
+    assert main(["train", "evaluate-relight", "--data", str(tiny_dataset), "--weights", str(frozen), "--quiet",
+                 "--reference-weights", str(tmp_path / "missing")]) != 0
