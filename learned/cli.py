@@ -88,17 +88,11 @@ def _train_shadow(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     import torch
 
-    from .evaluate import evaluate
+    from .evaluate import evaluate_relighter
     from .relighter import Relighter
 
     torch.set_num_threads(args.threads)
-    r = Relighter.load(args.weights)
-
-    def decompose(image: torch.Tensor, sky: torch.Tensor) -> dict:
-        return r.decompose_linear(image, sky)
-
-    metrics = evaluate(decompose, args.data, args.split, r.res, r.prior, args.max_images,
-                       shadow_fn=lambda out: r.shadow_net(out["normals"], out["lighting"]))
+    metrics = evaluate_relighter(Relighter.load(args.weights), args.data, args.split, args.max_images)
     print(json.dumps(metrics, indent=1))
     _write_json(args.json, metrics)
     return 0

@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import torch
@@ -61,7 +61,11 @@ from synth.photo import photo_gain
 from .data import load_photo
 from .objectives import solve_projected
 
-__all__ = ["average_precision", "evaluate", "load_ground_truth", "normal_angle_deg", "shading_error", "si_mse"]
+if TYPE_CHECKING:  # for the annotation only: evaluation does not load weights
+    from .relighter import Relighter
+
+__all__ = ["average_precision", "evaluate", "evaluate_relighter", "load_ground_truth", "normal_angle_deg",
+           "shading_error", "si_mse"]
 
 
 def si_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
@@ -269,3 +273,12 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
     res_["normal_median_deg"] = float(np.median(np.concatenate(angles)))
     res_["images"] = float(len(acc["albedo_si_mse"]))
     return res_
+
+
+def evaluate_relighter(relighter: Relighter, root: str | Path, split: str = "all",
+                       max_images: int | None = None) -> dict[str, float]:
+    """:func:`evaluate` of a loaded :class:`learned.Relighter`: its decomposition, working
+    resolution and prior, and its ShadowNet as the second shadow predictor (the metrics of
+    ``physrelight train evaluate --weights``)."""
+    return evaluate(relighter.decompose_linear, root, split, relighter.res, relighter.prior, max_images,
+                    shadow_fn=lambda out: relighter.shadow_net(out["normals"], out["lighting"]))

@@ -50,6 +50,7 @@ from .data import load_photo
 __all__ = ["METHODS", "evaluate_relight", "format_table", "relight_cases"]
 
 METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity")
+_REPORTED = (*METHODS, "reference")  # what a result may hold: the methods and a second pipeline's proposed
 
 Relight = Callable[..., dict[str, torch.Tensor]]
 
@@ -166,7 +167,7 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
 def format_table(result: dict) -> str:
     """A markdown table of :func:`evaluate_relight`'s result."""
     lines = ["| method | l1 | SSIM | PSNR dB | CIEDE2000 |", "| --- | --- | --- | --- | --- |"]
-    for m in (*METHODS, "reference"):
+    for m in _REPORTED:
         if m in result:
             v = result[m]
             lines.append(f"| {m} | {v['l1']:.4f} | {v['ssim']:.4f} | {v['psnr']:.2f} | {v['ciede2000']:.2f} |")
@@ -181,4 +182,4 @@ def format_table(result: dict) -> str:
 
 def finite(result: dict) -> bool:
     """True when every metric of every method is finite."""
-    return all(math.isfinite(x) for m in (*METHODS, "reference") if m in result for x in result[m].values())
+    return all(math.isfinite(x) for m in _REPORTED if m in result for x in result[m].values())

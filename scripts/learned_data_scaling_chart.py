@@ -3,7 +3,7 @@
 For each ``SCENES=RUN`` (a run of ``physrelight train inverse`` on a dataset of SCENES scenes),
 export the run's last checkpoint with the shipped ShadowNet and prior and the lighting step
 ``map_relative``, once as trained and once with test-time mirror averaging, and evaluate
-(:func:`learned.evaluate.evaluate`, the metrics of ``physrelight train evaluate``) on the
+(:func:`learned.evaluate.evaluate_relighter`, the metrics of ``physrelight train evaluate``) on the
 held-out dataset and on photos of the run's own training scenes (``--train-images`` of its
 ``train`` split): the gap between the two is what the network memorised. Writes
 ``OUT.json`` (every metric of every evaluation) and ``OUT.png`` (normal error, albedo si-MSE and
@@ -26,26 +26,24 @@ from pathlib import Path
 import torch
 
 from learned import checkpoint as ckpt
-from learned.evaluate import evaluate
+from learned.evaluate import evaluate_relighter
 from learned.relighter import WEIGHTS_DIR, Relighter
 from physrelight.io import atomic_path, write_json
 
 GOALS = {"normal_mae_deg": 20.0}  # and albedo: 2x better than the photo (drawn per point)
 
 
-def export(run: Path, dest: Path, mirror_average: bool) -> Path:
-    """``dest`` = the run's inverse network + the shipped ShadowNet and prior (a Relighter folder)."""
+def export(sidecar: Path, dest: Path, mirror_average: bool) -> Path:
+    """``dest`` = the checkpoint's inverse network + the shipped ShadowNet and prior (a Relighter folder)."""
     extra = {"lighting_solve": "map_relative", **({"mirror_average": "1"} if mirror_average else {})}
-    ckpt.export_weights(ckpt.checkpoint_at(run), dest / "inverse.safetensors", "inverse", extra=extra)
+    ckpt.export_weights(sidecar, dest / "inverse.safetensors", "inverse", extra=extra)
     for name in ("shadow.safetensors", "lighting_prior.npz"):
         (dest / name).write_bytes((WEIGHTS_DIR / name).read_bytes())
     return dest
 
 
 def measure(weights: Path, data: str, split: str, max_images: int | None) -> dict[str, float]:
-    r = Relighter.load(weights)
-    return evaluate(lambda image, sky: r.decompose_linear(image, sky), data, split, r.res, r.prior, max_images,
-                    shadow_fn=lambda out: r.shadow_net(out["normals"], out["lighting"]))
+    return evaluate_relighter(Relighter.load(weights), data, split, max_images)
 
 
 def chart(results: dict[str, dict], path: Path) -> None:
@@ -114,8 +112,9 @@ def main() -> None:
             continue
         data = json.loads((run_path / "config.json").read_text())["data"]
         with tempfile.TemporaryDirectory() as tmp:
-            plain = export(run_path, Path(tmp) / "plain", False)
-            mirrored = export(run_path, Path(tmp) / "mirror", True)
+            # the sidecar read above, so the step recorded is the one measured while the run trains on
+            plain = export(side, Path(tmp) / "plain", False)
+            mirrored = export(side, Path(tmp) / "mirror", True)
             results[scenes] = {
                 "run": run, "data": data, "step": step,
                 "heldout": measure(plain, args.heldout, "all", None),
