@@ -5,8 +5,9 @@ Sub-subcommands (heavy imports stay inside the handlers):
 * ``train inverse --data DIR --out RUN``: the self-supervised inverse rendering network;
 * ``train shadow --data DIR --out RUN --inverse RUN_OR_WEIGHTS``: ShadowNet on the
   inverse network's normals, lighting and shadows;
-* ``train evaluate --data DIR [--split all] [--weights DIR]``: held-out metrics of shipped
-  (or exported) weights next to the trivial baselines, as JSON;
+* ``train evaluate --data DIR [--split all] [--weights DIR] [--reference-weights DIR]``: held-out
+  metrics of shipped (or exported) weights next to the trivial baselines, with scene-bootstrap
+  intervals of the per-photo means, as JSON (with a reference: paired differences too);
 * ``train export --inverse RUN --shadow RUN --dest DIR``: weights-only safetensors for
   :meth:`learned.Relighter.load`.
 * ``train sky --data DIR --out RUN [--export PATH] [--evaluate DIR --json PATH]``: SkyGAN
@@ -88,11 +89,21 @@ def _train_shadow(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     import torch
 
-    from .evaluate import evaluate_relighter
+    from .evaluate import compare_decompositions, evaluate_relighter, scene_intervals
     from .relighter import Relighter
 
     torch.set_num_threads(args.threads)
-    metrics = evaluate_relighter(Relighter.load(args.weights), args.data, args.split, args.max_images)
+    # Load both before the long evaluation, so a bad --reference-weights fails at once.
+    relighter = Relighter.load(args.weights)
+    reference = Relighter.load(args.reference_weights) if args.reference_weights is not None else None
+    metrics, per_image = evaluate_relighter(relighter, args.data, args.split, args.max_images, return_per_image=True)
+    metrics["intervals"] = scene_intervals(per_image)
+    if reference is not None:
+        ref_metrics, ref_per_image = evaluate_relighter(reference, args.data, args.split, args.max_images,
+                                                        return_per_image=True)
+        ref_metrics["intervals"] = scene_intervals(ref_per_image)
+        metrics["reference"] = ref_metrics
+        metrics["paired"] = compare_decompositions(per_image, ref_per_image)
     print(json.dumps(metrics, indent=1))
     _write_json(args.json, metrics)
     return 0
@@ -343,6 +354,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ev.add_argument("--split", default="all", help="split to evaluate (default: all)")
     ev.add_argument("--weights", default=None, help="weights folder (default: the shipped ones)")
     ev.add_argument("--max-images", type=positive_int, default=None)
+    ev.add_argument("--reference-weights", default=None, metavar="FOLDER",
+                    help="a second weights folder, evaluated on the same photos ('reference'); 'paired' gives "
+                         "the differences of the per-photo metrics with scene-bootstrap intervals")
     ev.add_argument("--threads", type=positive_int, default=2)
     ev.add_argument("--json", default=None, help="also write the metrics here")
     ev.set_defaults(handler=_evaluate)

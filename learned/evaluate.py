@@ -58,14 +58,20 @@ from physrelight.lighting_prior import LightingPrior
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import photo_gain
 
+from physrelight.stats import paired_bootstrap
+
 from .data import load_photo
 from .objectives import solve_projected
 
 if TYPE_CHECKING:  # for the annotation only: evaluation does not load weights
     from .relighter import Relighter
 
-__all__ = ["average_precision", "evaluate", "evaluate_relighter", "load_ground_truth", "normal_angle_deg",
-           "shading_error", "si_mse"]
+__all__ = ["PER_IMAGE_METRICS", "average_precision", "compare_decompositions", "evaluate", "evaluate_relighter",
+           "load_ground_truth", "normal_angle_deg", "scene_intervals", "shading_error", "si_mse"]
+
+#: The per-photo metrics :func:`evaluate` can return one value per photo of (means over photos;
+#: shadow AP is pooled over pixels, so it has no per-photo value).
+PER_IMAGE_METRICS = ("normal_mae_deg", "albedo_si_mse", "lighting_shading_err", "lighting_si_rel_err")
 
 
 def si_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
@@ -153,7 +159,8 @@ def load_ground_truth(ds: SynthDataset, scene: str, view: int, light: int, res: 
 def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.Tensor]], root: str | Path,
              split: str, res: int, prior: LightingPrior, max_images: int | None = None,
              shadow_fn: Callable[[dict[str, torch.Tensor]], torch.Tensor] | None = None,
-             batch_size: int = 16) -> dict[str, float]:
+             batch_size: int = 16, return_per_image: bool = False
+             ) -> dict[str, float] | tuple[dict[str, float], dict[str, np.ndarray]]:
     """Metrics of a decomposition on a dataset split, with the trivial baselines.
 
     Args:
@@ -165,6 +172,10 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         max_images: evaluate at most this many photos (evenly spread), None = all.
         shadow_fn: optional second shadow predictor (ShadowNet) on the decomposition;
             reported as ``shadownet_ap``.
+        return_per_image: also return, per evaluated photo, ``"scene"`` (its scene name) and
+            each of :data:`PER_IMAGE_METRICS` and their ``baseline_`` versions, ``(N,)`` arrays
+            whose means are the reported figures (for :func:`scene_intervals` and
+            :func:`compare_decompositions`).
 
     Returns:
         Flat dict: ``albedo_si_mse``, ``normal_mae_deg`` (and ``normal_median_deg``,
@@ -174,7 +185,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         ``oracle_lighting_shading_err``, ``oracle_map_lighting_shading_err``), ``oracle_albedo_si_mse``,
         ``oracle_shadow_ap``, ``oracle_lighting_si_rel_err``, ``implied_albedo_si_mse`` (and
         ``_true_lighting``, ``_true_normals_lighting``), the same with ``baseline_``
-        prefixed, ``shadow_positive_rate``, ``images``.
+        prefixed, ``shadow_positive_rate``, ``images``; with ``return_per_image`` the tuple
+        ``(metrics, per_image)``.
     """
     ds = SynthDataset(root, split=split, mode="full")
     items = ds.items
@@ -194,6 +206,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                 "implied_albedo_si_mse_true_normals_lighting"):
         acc[key] = []
     angles: list[np.ndarray] = []
+    scene_of: list[str] = []
     scores, scores_sn, scores_oracle, labels, labels_direct = [], [], [], [], []
     for start in range(0, len(items), batch_size):
         chunk = items[start:start + batch_size]
@@ -208,6 +221,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
             fg = ~sky[j] & (gt["normal"].norm(dim=0, keepdim=True) > 0.5)
             if int(fg.sum()) == 0:
                 continue
+            scene_of.append(it.scene)
             acc["albedo_si_mse"].append(si_mse(out["albedo"][j], gt["albedo"], fg))
             acc["baseline_albedo_si_mse"].append(si_mse(image[j], gt["albedo"], fg))
             true_normal = F.normalize(gt["normal"].double(), dim=0)
@@ -272,13 +286,75 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         res_["shadownet_ap_direct"] = average_precision(np.concatenate(scores_sn), yd)
     res_["normal_median_deg"] = float(np.median(np.concatenate(angles)))
     res_["images"] = float(len(acc["albedo_si_mse"]))
-    return res_
+    if not return_per_image:
+        return res_
+    per_image = {"scene": np.asarray(scene_of)}
+    for key in PER_IMAGE_METRICS:
+        for name in (key, f"baseline_{key}"):
+            per_image[name] = np.asarray(acc[name], dtype=np.float64)
+    return res_, per_image
+
+
+def scene_intervals(per_image: dict[str, np.ndarray], samples: int = 2000, seed: int = 0,
+                    level: float = 0.95) -> dict[str, dict[str, float]]:
+    """Scene-bootstrap confidence intervals of the per-photo means of :func:`evaluate`.
+
+    The photos of one scene share its geometry and materials, so they are not independent:
+    whole scenes are resampled (:func:`physrelight.stats.paired_bootstrap` against zero).
+
+    Args:
+        per_image: the second value of ``evaluate(..., return_per_image=True)``.
+
+    Returns:
+        ``{metric: {"mean", "lo", "hi", "scenes"}}`` for every metric of ``per_image``.
+    """
+    scenes = _scenes(per_image)
+    out = {}
+    for key, values in per_image.items():
+        if key == "scene":
+            continue
+        d = paired_bootstrap(values, np.zeros_like(values), groups=scenes, samples=samples, seed=seed, level=level)
+        out[key] = {"mean": d.diff, "lo": d.lo, "hi": d.hi, "scenes": d.groups}
+    return out
+
+
+def compare_decompositions(per_image: dict[str, np.ndarray], reference: dict[str, np.ndarray],
+                           samples: int = 2000, seed: int = 0, level: float = 0.95) -> dict[str, dict[str, float]]:
+    """Paired differences ``per_image - reference`` of two decompositions on the same photos.
+
+    Args:
+        per_image, reference: ``evaluate(..., return_per_image=True)[1]`` of two
+            decompositions on the same dataset, split and ``max_images``.
+
+    Returns:
+        ``{metric: {"diff", "lo", "hi", "groups"}}`` for :data:`PER_IMAGE_METRICS`: mean
+        difference (negative = ``per_image`` has the lower error) and its scene-bootstrap
+        interval.
+
+    Raises:
+        ValueError: if the two were not evaluated on the same photos.
+    """
+    scenes = _scenes(per_image)
+    if not np.array_equal(scenes, _scenes(reference)):
+        raise ValueError("the two decompositions were evaluated on different photos "
+                         f"({scenes.size} and {_scenes(reference).size}, or in a different order)")
+    return {key: paired_bootstrap(per_image[key], reference[key], groups=scenes, samples=samples, seed=seed,
+                                  level=level)._asdict() for key in PER_IMAGE_METRICS}
+
+
+def _scenes(per_image: dict[str, np.ndarray]) -> np.ndarray:
+    if "scene" not in per_image:
+        raise ValueError("per_image has no 'scene' labels: pass the second value of "
+                         "evaluate(..., return_per_image=True)")
+    return np.asarray(per_image["scene"])
 
 
 def evaluate_relighter(relighter: Relighter, root: str | Path, split: str = "all",
-                       max_images: int | None = None) -> dict[str, float]:
+                       max_images: int | None = None, return_per_image: bool = False
+                       ) -> dict[str, float] | tuple[dict[str, float], dict[str, np.ndarray]]:
     """:func:`evaluate` of a loaded :class:`learned.Relighter`: its decomposition, working
     resolution and prior, and its ShadowNet as the second shadow predictor (the metrics of
     ``physrelight train evaluate --weights``)."""
     return evaluate(relighter.decompose_linear, root, split, relighter.res, relighter.prior, max_images,
-                    shadow_fn=lambda out: relighter.shadow_net(out["normals"], out["lighting"]))
+                    shadow_fn=lambda out: relighter.shadow_net(out["normals"], out["lighting"]),
+                    return_per_image=return_per_image)

@@ -1,7 +1,8 @@
 """Held-out quality of the inverse network vs the number of training scenes (docs/learned.md).
 
-For each ``SCENES=RUN`` (a run of ``physrelight train inverse`` on a dataset of SCENES scenes),
-export the run's last checkpoint with the shipped ShadowNet and prior and the lighting step
+For each ``SCENES=RUN`` or ``SCENES=RUN@STEP`` (a run of ``physrelight train inverse`` on a dataset
+of SCENES scenes), export the run's last checkpoint (or the one at STEP: a run that trains on past
+the step the chart reports) with the shipped ShadowNet and prior and the lighting step
 ``map_relative``, once as trained and once with test-time mirror averaging, and evaluate
 (:func:`learned.evaluate.evaluate_relighter`, the metrics of ``physrelight train evaluate``) on the
 held-out dataset and on photos of the run's own training scenes (``--train-images`` of its
@@ -87,7 +88,7 @@ def chart(results: dict[str, dict], path: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--heldout", required=True, help="held-out dataset (evaluated on its split 'all')")
-    ap.add_argument("--runs", nargs="+", required=True, metavar="SCENES=RUN")
+    ap.add_argument("--runs", nargs="+", required=True, metavar="SCENES=RUN[@STEP]")
     ap.add_argument("--train-images", type=int, default=288, help="photos of the training scenes evaluated")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", required=True, help="output path without extension (.json and .png are written)")
@@ -98,11 +99,12 @@ def main() -> None:
     results: dict[str, dict] = json.loads(out_json.read_text()) if out_json.is_file() else {}
     for item in args.runs:
         scenes, _, run = item.partition("=")
-        if not scenes.isdigit() or not run:
-            raise SystemExit(f"--runs takes SCENES=RUN, got {item!r}")
+        run, at, step_text = run.partition("@")
+        if not scenes.isdigit() or not run or (at and not step_text.isdigit()):
+            raise SystemExit(f"--runs takes SCENES=RUN or SCENES=RUN@STEP, got {item!r}")
         run_path = Path(run)
         try:
-            side = ckpt.checkpoint_at(run_path)
+            side = ckpt.checkpoint_at(run_path, int(step_text) if at else None)
         except ValueError as e:
             raise SystemExit(str(e)) from None
         step = json.loads(side.read_text())["step"]

@@ -555,12 +555,12 @@ def test_20_mirror_averaging_is_exactly_mirror_symmetric_and_travels_with_the_ex
         InverseNet(4, 2, mirror_average="yes")
 
 
-def test_21_a_perfect_decomposition_scores_zero_and_its_albedo_ladder_meets_the_reference(tiny_dataset: Path,
-                                                                                         tiny_prior: Path) -> None:
-    from learned.evaluate import evaluate, load_ground_truth
+def _truth_decomposer(root: Path):
+    """A "network" that returns the ground truth of the photos of ``evaluate``'s order."""
+    from learned.evaluate import load_ground_truth
     from synth.dataset import SynthDataset
 
-    ds = SynthDataset(tiny_dataset, split="all", mode="full")
+    ds = SynthDataset(root, split="all", mode="full")
     queue = list(ds.items)
 
     def truth(image: torch.Tensor, sky: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -573,6 +573,14 @@ def test_21_a_perfect_decomposition_scores_zero_and_its_albedo_ladder_meets_the_
                 "shadow": torch.stack([g["direct_shadow"] for g in gts]),
                 "lighting": torch.stack([g["lighting"] for g in gts]).float()}
 
+    return truth, queue
+
+
+def test_21_a_perfect_decomposition_scores_zero_and_its_albedo_ladder_meets_the_reference(tiny_dataset: Path,
+                                                                                         tiny_prior: Path) -> None:
+    from learned.evaluate import evaluate
+
+    truth, queue = _truth_decomposer(tiny_dataset)
     m = evaluate(truth, tiny_dataset, "all", 24, LightingPrior.load(tiny_prior), batch_size=3)
     assert not queue and m["albedo_si_mse"] < 1e-12 and m["normal_mae_deg"] < 0.05
     assert m["lighting_rel_err"] < 1e-6 and m["lighting_shading_err"] < 1e-6
@@ -582,3 +590,65 @@ def test_21_a_perfect_decomposition_scores_zero_and_its_albedo_ladder_meets_the_
                 "implied_albedo_si_mse_true_normals_lighting"):
         assert m[key] == pytest.approx(m["oracle_albedo_si_mse"], rel=1e-4), key
     assert m["oracle_albedo_si_mse"] < m["baseline_albedo_si_mse"]
+
+
+def test_22_per_photo_metrics_give_the_reported_means_scene_intervals_and_paired_differences(
+        tiny_dataset: Path, tiny_prior: Path, tmp_path: Path) -> None:
+    from learned.evaluate import PER_IMAGE_METRICS, compare_decompositions, evaluate, scene_intervals
+
+    prior = LightingPrior.load(tiny_prior)
+    truth, _ = _truth_decomposer(tiny_dataset)
+    m, per = evaluate(truth, tiny_dataset, "all", 24, prior, batch_size=3, return_per_image=True)
+    assert per["scene"].size == m["images"] and len(set(per["scene"])) == 3  # 3 scenes x 2 views x 2 lightings
+    for key in PER_IMAGE_METRICS:
+        assert per[key].mean() == pytest.approx(m[key], rel=1e-12), key
+        assert per[f"baseline_{key}"].mean() == pytest.approx(m[f"baseline_{key}"], rel=1e-12), key
+    ci = scene_intervals(per)
+    for key, c in ci.items():
+        assert c["lo"] <= c["mean"] <= c["hi"] and c["scenes"] == 3, key
+    # The camera-facing baseline's per-photo spread gives a proper interval around its mean.
+    b = ci["baseline_normal_mae_deg"]
+    assert b["lo"] < b["mean"] < b["hi"] and b["mean"] == pytest.approx(m["baseline_normal_mae_deg"])
+
+    # The truth against itself: no difference, and an interval of zero width.
+    truth2, _ = _truth_decomposer(tiny_dataset)
+    _, again = evaluate(truth2, tiny_dataset, "all", 24, prior, batch_size=5, return_per_image=True)
+    for key, d in compare_decompositions(per, again).items():
+        assert d["diff"] == d["lo"] == d["hi"] == 0.0, key
+    # The truth against a decomposition that is the truth with camera-facing normals: better
+    # normals on every photo, so every scene resample is negative.
+    truth3, _ = _truth_decomposer(tiny_dataset)
+
+    def flat_normals(image: torch.Tensor, sky: torch.Tensor) -> dict[str, torch.Tensor]:
+        out = truth3(image, sky)
+        out["normals"] = torch.zeros_like(out["normals"])
+        out["normals"][:, 2] = 1.0
+        return out
+
+    _, flat = evaluate(flat_normals, tiny_dataset, "all", 24, prior, batch_size=3, return_per_image=True)
+    d = compare_decompositions(per, flat)["normal_mae_deg"]
+    assert d["hi"] < 0 and d["diff"] == pytest.approx(-m["baseline_normal_mae_deg"], rel=1e-6)
+    with pytest.raises(ValueError, match="different photos"):
+        compare_decompositions(per, {k: v[:-1] for k, v in flat.items()})
+    with pytest.raises(ValueError, match="scene"):
+        scene_intervals({"normal_mae_deg": per["normal_mae_deg"]})
+
+    # The command line: intervals always, a reference's metrics and the paired differences on request.
+    from learned.checkpoint import _atomic_save_tensors
+    from physrelight.cli import main
+
+    weights = tmp_path / "w"
+    torch.manual_seed(5)
+    for net, kind in ((InverseNet(4, 2), "inverse"), (ShadowNet(4, 2), "shadow")):
+        _atomic_save_tensors(dict(net.state_dict()), weights / f"{kind}.safetensors",
+                             {"kind": kind, "width": "4", "depth": "2", "res": "24"})
+    shutil.copy(tiny_prior, weights / "lighting_prior.npz")
+    out = tmp_path / "e.json"
+    assert main(["train", "evaluate", "--data", str(tiny_dataset), "--weights", str(weights), "--threads", "1",
+                 "--reference-weights", str(weights), "--json", str(out)]) == 0
+    got = json.loads(out.read_text())
+    assert got["intervals"]["normal_mae_deg"]["mean"] == pytest.approx(got["normal_mae_deg"])
+    assert got["reference"]["normal_mae_deg"] == got["normal_mae_deg"]
+    assert all(v["diff"] == 0.0 for v in got["paired"].values())
+    assert main(["train", "evaluate", "--data", str(tiny_dataset), "--weights", str(weights),
+                 "--reference-weights", str(tmp_path / "missing")]) != 0
