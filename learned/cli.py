@@ -122,6 +122,8 @@ def _export(args: argparse.Namespace) -> int:
             extra["lighting_solve"] = args.lighting_solve
         if kind == "inverse" and args.mirror_average:
             extra["mirror_average"] = "1"
+        if kind == "inverse" and args.meter_exposure:
+            extra["meter_exposure"] = "1"
         path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind, extra=extra or None)
         print(f"{kind}: {side} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
     return 0
@@ -374,6 +376,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ex.add_argument("--mirror-average", action="store_true",
                     help="the exported inverse network averages each photo's layers with those of its mirror image "
                          "(two passes; learned.networks.mirror_averaged)")
+    ex.add_argument("--meter-exposure", action="store_true",
+                    help="the exported inverse network sees each photo re-metered to the training exposure "
+                         "(learned.networks.metered), so its layers do not depend on the photo's exposure")
     ex.set_defaults(handler=_export)
 
     _add_sky_stages(tsub)

@@ -23,7 +23,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-__all__ = ["UNet", "InverseNet", "ShadowNet", "count_parameters", "mirror_averaged", "normalise_lighting",
+from physrelight import colour
+
+__all__ = ["EXPOSURE_KEY", "UNet", "InverseNet", "ShadowNet", "count_parameters", "log_average_luminance", "metered",
+           "mirror_averaged", "normalise_lighting",
            "tile_lighting"]
 
 
@@ -119,10 +122,15 @@ class InverseNet(nn.Module):
             average (:func:`mirror_averaged`; :func:`learned.objectives.decompose_and_solve`
             reads it). An inference choice like ``lighting_solve`` (chosen at export); training
             never uses it.
+        meter_exposure: at inference, the network sees the photo re-metered to
+            :data:`EXPOSURE_KEY` (:func:`metered`), so its layers do not depend on the photo's
+            exposure; the lighting is still solved against the photo as given. An inference
+            choice (chosen at export); training never uses it.
     """
 
     def __init__(self, width: int = 16, depth: int = 3, lighting_solve: str = "project",
-                 initial_shadow_logit: float = 3.0, mirror_average: bool = False) -> None:
+                 initial_shadow_logit: float = 3.0, mirror_average: bool = False,
+                 meter_exposure: bool = False) -> None:
         super().__init__()
         if lighting_solve not in LIGHTING_SOLVES:
             raise ValueError(f"lighting_solve must be one of {LIGHTING_SOLVES}, got {lighting_solve!r}")
@@ -131,7 +139,9 @@ class InverseNet(nn.Module):
         if not isinstance(mirror_average, bool):
             raise ValueError(f"mirror_average must be True or False, got {mirror_average!r}")
         self.width, self.depth, self.lighting_solve = width, depth, lighting_solve
-        self.mirror_average = mirror_average
+        if not isinstance(meter_exposure, bool):
+            raise ValueError(f"meter_exposure must be True or False, got {meter_exposure!r}")
+        self.mirror_average, self.meter_exposure = mirror_average, meter_exposure
         self.unet = UNet(3, 7, width, depth)
         with torch.no_grad():
             # Start from a plausible decomposition: mid-grey albedo, camera-facing
@@ -150,6 +160,32 @@ class InverseNet(nn.Module):
         normals = raw / raw.norm(dim=1, keepdim=True)
         shadow = torch.sigmoid(out[:, 6:7])
         return {"albedo": albedo, "normals": normals, "shadow": shadow}
+
+
+#: The log-average luminance :func:`metered` maps a photo to: the key synth's camera meters to
+#: (``synth.photo.metered_ev``; the linearised training photos' median is 0.174).
+EXPOSURE_KEY = 0.18
+
+
+def log_average_luminance(image: torch.Tensor) -> torch.Tensor:
+    """``(B,)`` log-average Rec. 709 luminance of ``image (B, 3, H, W)`` linear RGB, over the
+    whole frame (sky included, as a camera meters; luminance floored at 1e-6)."""
+    _check_input(image, 3, "image")
+    y = (image * image.new_tensor(colour.LUMINANCE)[None, :, None, None]).sum(1)
+    return torch.exp(torch.log(y.clamp_min(1e-6)).mean((1, 2)))
+
+
+def metered(image: torch.Tensor, key: float = EXPOSURE_KEY) -> torch.Tensor:
+    """``image (B, 3, H, W)`` linear RGB scaled per photo so its log-average luminance is ``key``.
+
+    A photo 3 stops under-exposed is brought back to the exposures the network was trained on
+    (synth meters every photo to 0.18 +- 0.7 EV); the gain is limited to 2**+-8 so a black frame
+    stays finite. Scaling a photo by ``k`` (no clipping) leaves the result unchanged.
+    """
+    if not (math.isfinite(key) and key > 0):
+        raise ValueError(f"key must be a positive number, got {key!r}")
+    gain = (key / log_average_luminance(image)).clamp(2.0**-8, 2.0**8)
+    return image * gain[:, None, None, None]
 
 
 def mirror_averaged(net: nn.Module, image: torch.Tensor) -> dict[str, torch.Tensor]:

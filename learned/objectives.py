@@ -39,7 +39,7 @@ from physrelight import camera, image_model, losses
 from physrelight.lighting_prior import LightingPrior
 
 from .data import Batch, mvs_normals
-from .networks import mirror_averaged
+from .networks import metered, mirror_averaged
 
 __all__ = ["LossWeights", "SMOOTHNESS_EDGE_GAIN", "decompose_and_solve", "edge_aware_smoothness", "inverse_losses",
            "solve_projected"]
@@ -121,7 +121,8 @@ def solve_projected(image: torch.Tensor, albedo: torch.Tensor, normals: torch.Te
 
 
 def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Tensor,
-                        prior: LightingPrior, mirror_average: bool | None = None) -> dict[str, torch.Tensor]:
+                        prior: LightingPrior, mirror_average: bool | None = None,
+                        meter_exposure: bool | None = None) -> dict[str, torch.Tensor]:
     """Run the network and solve each photo's lighting.
 
     Args:
@@ -130,6 +131,8 @@ def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Te
         mirror_average: average the layers of the photo and its mirror image before the solve
             (:func:`learned.networks.mirror_averaged`); None = the network's own
             ``mirror_average`` (an inference choice made at export). Training passes False.
+        meter_exposure: the network sees :func:`learned.networks.metered` photos (the lighting is
+            solved against ``image`` as given); None = the network's own ``meter_exposure``.
 
     Returns:
         ``albedo, normals, shadow`` as the network gives them, ``lighting_solved`` and
@@ -139,7 +142,10 @@ def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Te
     module = getattr(net, "module", net)  # DDP wraps the network
     if mirror_average is None:
         mirror_average = getattr(module, "mirror_average", False)
-    out = dict(mirror_averaged(net, image) if mirror_average else net(image))
+    if meter_exposure is None:
+        meter_exposure = getattr(module, "meter_exposure", False)
+    seen = metered(image) if meter_exposure else image
+    out = dict(mirror_averaged(net, seen) if mirror_average else net(seen))
     fg = (~sky).to(image.dtype)
     method = getattr(module, "lighting_solve", "project")
     out["lighting_solved"], out["lighting"] = solve_projected(image, out["albedo"], out["normals"], out["shadow"],
@@ -181,7 +187,7 @@ def inverse_losses(net: torch.nn.Module, batch: Batch, prior: LightingPrior,
         float, and the decomposition (see :func:`decompose_and_solve`).
     """
     image, sky = batch.image, batch.sky
-    out = decompose_and_solve(net, image, sky, prior, mirror_average=False)
+    out = decompose_and_solve(net, image, sky, prior, mirror_average=False, meter_exposure=False)
     fg = out["foreground"]
     albedo, normals, shadow = out["albedo"], out["normals"], out["shadow"]
 

@@ -171,6 +171,8 @@ def load_network(path: str | Path, kind: str) -> torch.nn.Module:
             cfg["lighting_solve"] = meta["lighting_solve"]
         if "mirror_average" in meta:  # chosen at export (train export --mirror-average)
             cfg["mirror_average"] = meta["mirror_average"] == "1"
+        if "meter_exposure" in meta:  # chosen at export (train export --meter-exposure)
+            cfg["meter_exposure"] = meta["meter_exposure"] == "1"
         net = _build(kind, cfg)
         net.load_state_dict(tensors)
     return net.eval()
@@ -180,7 +182,8 @@ def _build(kind: str, cfg: dict[str, Any]) -> torch.nn.Module:
     """An untrained network of a run's configuration (runs before ``lighting_solve`` existed: project)."""
     if kind == "inverse":
         return InverseNet(int(cfg["width"]), int(cfg["depth"]), cfg.get("lighting_solve", "project"),
-                          mirror_average=bool(cfg.get("mirror_average", False)))
+                          mirror_average=bool(cfg.get("mirror_average", False)),
+                          meter_exposure=bool(cfg.get("meter_exposure", False)))
     return ShadowNet(int(cfg["width"]), int(cfg["depth"]))
 
 

@@ -652,3 +652,46 @@ def test_22_per_photo_metrics_give_the_reported_means_scene_intervals_and_paired
     assert all(v["diff"] == 0.0 for v in got["paired"].values())
     assert main(["train", "evaluate", "--data", str(tiny_dataset), "--weights", str(weights),
                  "--reference-weights", str(tmp_path / "missing")]) != 0
+
+
+def test_23_a_metered_network_decomposes_a_photo_the_same_at_any_exposure(tiny_dataset: Path, tiny_prior: Path,
+                                                                          tmp_path: Path) -> None:
+    from learned.checkpoint import _atomic_save_tensors, read_metadata
+    from learned.networks import EXPOSURE_KEY, log_average_luminance, metered
+    from learned.objectives import decompose_and_solve
+    from learned.train import load_inverse
+
+    image = PairSampler(tiny_dataset, split="all", res=24).batch(2, 0).image
+    # Scaling the linear tensor is a pure exposure change (the network takes any positive values).
+    # Metering maps every photo to the key, and a scaled photo to the same photo.
+    torch.testing.assert_close(log_average_luminance(metered(image)), torch.full((len(image),), EXPOSURE_KEY),
+                               rtol=1e-5, atol=0)
+    torch.testing.assert_close(metered(image / 8), metered(image), rtol=1e-5, atol=1e-7)
+    assert bool(torch.isfinite(metered(torch.zeros(1, 3, 4, 4))).all())
+    prior = LightingPrior.load(tiny_prior)
+    sky = torch.zeros(len(image), 1, 24, 24, dtype=torch.bool)
+    torch.manual_seed(0)
+    net = InverseNet(4, 2, lighting_solve="map_relative", meter_exposure=True).eval()
+    with torch.no_grad():
+        a = decompose_and_solve(net, image, sky, prior)
+        dark = decompose_and_solve(net, image / 8, sky, prior)
+        bright = decompose_and_solve(net, image * 4, sky, prior)
+        plain = decompose_and_solve(net, image / 8, sky, prior, meter_exposure=False)
+    for other in (dark, bright):
+        for k in ("albedo", "normals", "shadow"):
+            torch.testing.assert_close(other[k], a[k], rtol=1e-4, atol=1e-5)
+    # The lighting is solved against the photo as given, so it carries the exposure (map_relative
+    # is exposure-equivariant).
+    torch.testing.assert_close(dark["lighting"] * 8, a["lighting"], rtol=1e-3, atol=1e-5)
+    torch.testing.assert_close(bright["lighting"] / 4, a["lighting"], rtol=1e-3, atol=1e-5)
+    # Without metering the network sees the darker photo and answers differently.
+    assert float((plain["normals"] - a["normals"]).abs().max()) > 1e-3
+    # Chosen at export and read back; training never meters.
+    path = tmp_path / "inverse.safetensors"
+    _atomic_save_tensors(dict(net.state_dict()), path, {"kind": "inverse", "width": "4", "depth": "2", "res": "24",
+                                                         "lighting_solve": "map_relative", "meter_exposure": "1"})
+    assert read_metadata(path)["meter_exposure"] == "1" and load_inverse(path).meter_exposure
+    with pytest.raises(ValueError, match="meter_exposure"):
+        InverseNet(4, 2, meter_exposure=1)
+    with pytest.raises(ValueError, match="key"):
+        metered(image, key=0.0)
