@@ -37,10 +37,12 @@ def _handler(args: argparse.Namespace) -> int:
         words += ["--threads", str(args.threads)]
     if args.no_abs:
         words.append("--no-abs")
+    if args.weights is not None:
+        words += ["--weights", args.weights]
     command = " ".join(shlex.quote(w) for w in words)
     progress = (lambda msg: None) if args.quiet else (lambda msg: print(msg, flush=True))
     report = run_bench(level, args.data, args.output, command, threads=args.threads, runs_dir=args.runs,
-                       with_abs=not args.no_abs, progress=progress)
+                       with_abs=not args.no_abs, progress=progress, weights=args.weights)
     v = report["verdicts"]
     words = ", ".join(f"{k} {'PASS' if x['passed'] else 'FAIL'}" for k, x in v.items())
     print(f"bench done in {report['seconds']:.0f} s ({words}) -> {args.output}/bench.md")
@@ -64,5 +66,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--runs", default="runs", metavar="DIR",
                    help="where the width sweep finds runs/width_4, width_8, width_16 (default: runs)")
     p.add_argument("--no-abs", action="store_true", help="skip the (slow) analysis-by-synthesis baseline")
+    p.add_argument("--weights", default=None, metavar="DIR",
+                   help="weights folder of the learned methods (default: the shipped learned/weights)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_handler)

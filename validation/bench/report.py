@@ -214,7 +214,7 @@ def markdown(report: dict[str, Any], chart_paths: list[tuple[str, str]]) -> str:
                          f"{q['pairs_better']} of {q['pairs']} pairs and {q['scenes_better']} of {q['scenes']} scenes "
                          f"(scene means {q['scene_mean_diff']:+.4f} +- {q['scene_se']:.4f} s.e.)")
     if report.get("renderer_weights"):
-        lines.append("- `proposed` runs the shipped neural renderer (`learned/weights/renderer.safetensors`) on the "
+        lines.append(f"- `proposed` runs the neural renderer of `{report.get('weights', 'learned/weights')}` on the "
                      "decomposition and ShadowNet's target shadow; `shadownet_lambertian` is the same pipeline with "
                      "the Lambertian image model in place of the renderer.")
     else:

@@ -211,24 +211,30 @@ def gather_views(level: BenchLevel, data: str | Path | None,
 
 def run_bench(level: BenchLevel, data: str | Path | None, out_dir: str | Path, command: str, threads: int = 2,
               runs_dir: str | Path = "runs", with_abs: bool = True,
-              progress: Callable[[str], None] = print) -> dict[str, Any]:
+              progress: Callable[[str], None] = print, weights: str | Path | None = None) -> dict[str, Any]:
     """Run the benchmark at ``level`` and write ``bench.md``, ``bench.json`` and ``charts/`` into ``out_dir``.
+
+    ``weights`` is the learned methods' weights folder (:meth:`learned.Relighter.load`; None:
+    the shipped ``learned/weights``), so a candidate pipeline is benchmarked without touching them.
 
     Returns:
         bench.json's content.
     """
     if threads < 1:
         raise ValueError(f"threads must be >= 1, got {threads}")
+    if weights is not None and not (Path(weights) / "inverse.safetensors").is_file():
+        # checked before minutes of rendering, not after
+        raise ValueError(f"--weights {str(weights)!r} is not a weights folder (no inverse.safetensors)")
     before = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
-        return _run(level, data, out_dir, command, runs_dir, with_abs, progress)
+        return _run(level, data, out_dir, command, runs_dir, with_abs, progress, weights)
     finally:
         torch.set_num_threads(before)  # the caller's setting (tests run in one process)
 
 
 def _run(level: BenchLevel, data: str | Path | None, out_dir: str | Path, command: str, runs_dir: str | Path,
-         with_abs: bool, progress: Callable[[str], None]) -> dict[str, Any]:
+         with_abs: bool, progress: Callable[[str], None], weights: str | Path | None = None) -> dict[str, Any]:
     from learned import Relighter
     from synth.backend import load_mitsuba
 
@@ -249,7 +255,7 @@ def _run(level: BenchLevel, data: str | Path | None, out_dir: str | Path, comman
 
     phases = {"data": data_info["seconds"]}
     t0 = time.perf_counter()
-    relighter = Relighter.load()
+    relighter = Relighter.load(weights)
     methods = build_methods(relighter)
     runs: dict[str, MethodRun] = {}
     for name, m in methods.items():
@@ -315,6 +321,7 @@ def _run(level: BenchLevel, data: str | Path | None, out_dir: str | Path, comman
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
         "data": {**data_info, "views": len(views), "pairs": describe_pairs(pairs)},
         "renderer_weights": relighter.renderer is not None, "phase_seconds": phases,
+        "weights": "learned/weights" if weights is None else str(weights),
     }
     report["seconds"] = round(time.perf_counter() - t_start, 1)
     return write_report(out_dir, report, pairs, runs, diagnostics, sweep, sweep_methods, len(sub), notes,
