@@ -35,9 +35,10 @@ Metrics, each next to a trivial baseline:
   further from ``L_gt`` in coefficients than the prior's mean); this one does not. Baseline:
   the prior's mean; reference (``oracle_``): the pipeline's own solve and projection
   (:func:`learned.objectives.solve_projected`) fed the true albedo, normals and sun visibility,
-  i.e. the best a perfect network could get from this lighting step, and (``oracle_map_``) the
+  i.e. the best a perfect network could get from this lighting step, (``oracle_map_``) the
   MAP solve in the prior's subspace (:func:`physrelight.image_model.solve_lighting_map`) fed
-  the same.
+  the same, and (``oracle_map_relative_``) its exposure-equivariant form (``relative=True``, the
+  shipped network's ``map_relative`` step) fed the same.
 
 Ground truth is read with ``SynthDataset(mode="full")``; photos go through the same
 linearisation as in training.
@@ -182,7 +183,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         ``normal_mae_deg_mvs`` / ``_no_mvs``, ``normal_mae_deg_up`` / ``_not_up``), ``shadow_ap`` (labels: sun visibility
         < 0.5), ``shadow_ap_direct`` (labels: direct-light ratio < 0.5),
         ``lighting_rel_err``, ``lighting_si_rel_err``, ``lighting_shading_err`` (and
-        ``oracle_lighting_shading_err``, ``oracle_map_lighting_shading_err``), ``oracle_albedo_si_mse``,
+        ``oracle_lighting_shading_err``, ``oracle_map_lighting_shading_err``,
+        ``oracle_map_relative_lighting_shading_err``), ``oracle_albedo_si_mse``,
         ``oracle_shadow_ap``, ``oracle_lighting_si_rel_err``, ``implied_albedo_si_mse`` (and
         ``_true_lighting``, ``_true_normals_lighting``), the same with ``baseline_``
         prefixed, ``shadow_positive_rate``, ``images``; with ``return_per_image`` the tuple
@@ -201,7 +203,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         "baseline_normal_mae_deg", "baseline_lighting_rel_err", "baseline_lighting_si_rel_err")}
     for key in ("normal_mae_deg_mvs", "normal_mae_deg_no_mvs", "normal_mae_deg_up", "normal_mae_deg_not_up",
                 "lighting_shading_err", "baseline_lighting_shading_err", "oracle_lighting_shading_err",
-                "oracle_map_lighting_shading_err", "oracle_lighting_si_rel_err", "oracle_albedo_si_mse",
+                "oracle_map_lighting_shading_err", "oracle_map_relative_lighting_shading_err",
+                "oracle_lighting_si_rel_err", "oracle_albedo_si_mse",
                 "implied_albedo_si_mse", "implied_albedo_si_mse_true_lighting",
                 "implied_albedo_si_mse_true_normals_lighting"):
         acc[key] = []
@@ -261,8 +264,9 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                 fg[None].to(image.dtype)
             _, oracle = solve_projected(im, alb, nrm, vis, m, prior)
             oracle_map = image_model.solve_lighting_map(im, alb, nrm, m, prior, shadow=vis)
+            oracle_rel = image_model.solve_lighting_map(im, alb, nrm, m, prior, shadow=vis, relative=True)
             for name, light in (("", out["lighting"][j]), ("baseline_", mean_light), ("oracle_", oracle[0]),
-                                ("oracle_map_", oracle_map[0])):
+                                ("oracle_map_", oracle_map[0]), ("oracle_map_relative_", oracle_rel[0])):
                 acc[f"{name}lighting_shading_err"].append(shading_error(light, gt["lighting"], gt["normal"], fg))
             acc["oracle_lighting_si_rel_err"].append(_lighting_errors(oracle[0], gt["lighting"])[1])
             labels.append((gt["shadow"][fg] < 0.5).numpy())
