@@ -56,10 +56,9 @@ import torch.nn.functional as F
 
 from physrelight import camera, image_model
 from physrelight.lighting_prior import LightingPrior
+from physrelight.stats import paired_bootstrap
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import photo_gain
-
-from physrelight.stats import paired_bootstrap
 
 from .data import load_photo
 from .objectives import solve_projected

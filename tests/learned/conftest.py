@@ -5,9 +5,21 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import torch
 
 TINY = dict(scenes=3, views=2, lights=2, res=24, spp=4, gbuffer_spp=2, shadow_spp=2, env_resolution=16,
             kinds=("sunsky", "overcast", "hdri"))
+
+
+def save_weights(net: torch.nn.Module, path: Path, kind: str, **extra: str) -> Path:
+    """Export a module the way ``train export`` does (weights + kind/width/depth/res metadata, and
+    ``extra`` metadata such as ``lighting_solve`` or ``meter_exposure``)."""
+    from learned.checkpoint import _atomic_save_tensors
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _atomic_save_tensors(dict(net.state_dict()), path, {"kind": kind, "width": str(net.width),
+                                                        "depth": str(net.depth), "res": "24", **extra})
+    return path
 
 
 @pytest.fixture(scope="session")

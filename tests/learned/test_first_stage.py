@@ -27,6 +27,8 @@ from learned.train import TrainConfig, train
 from physrelight.lighting_prior import LightingPrior
 from synth.dataset import GroundTruthAccessError
 
+from .conftest import save_weights
+
 TINY_NET = dict(width=4, depth=2, res=24)
 
 
@@ -642,14 +644,12 @@ def test_22_per_photo_metrics_give_the_reported_means_scene_intervals_and_paired
         scene_intervals({"normal_mae_deg": per["normal_mae_deg"]})
 
     # The command line: intervals always, a reference's metrics and the paired differences on request.
-    from learned.checkpoint import _atomic_save_tensors
     from physrelight.cli import main
 
     weights = tmp_path / "w"
     torch.manual_seed(5)
     for net, kind in ((InverseNet(4, 2), "inverse"), (ShadowNet(4, 2), "shadow")):
-        _atomic_save_tensors(dict(net.state_dict()), weights / f"{kind}.safetensors",
-                             {"kind": kind, "width": "4", "depth": "2", "res": "24"})
+        save_weights(net, weights / f"{kind}.safetensors", kind)
     shutil.copy(tiny_prior, weights / "lighting_prior.npz")
     out = tmp_path / "e.json"
     assert main(["train", "evaluate", "--data", str(tiny_dataset), "--weights", str(weights), "--threads", "1",
@@ -664,7 +664,7 @@ def test_22_per_photo_metrics_give_the_reported_means_scene_intervals_and_paired
 
 def test_23_a_metered_network_decomposes_a_photo_the_same_at_any_exposure(tiny_dataset: Path, tiny_prior: Path,
                                                                           tmp_path: Path) -> None:
-    from learned.checkpoint import _atomic_save_tensors, read_metadata
+    from learned.checkpoint import read_metadata
     from learned.networks import EXPOSURE_KEY, log_average_luminance, metered
     from learned.objectives import decompose_and_solve
     from learned.train import load_inverse
@@ -695,9 +695,8 @@ def test_23_a_metered_network_decomposes_a_photo_the_same_at_any_exposure(tiny_d
     # Without metering the network sees the darker photo and answers differently.
     assert float((plain["normals"] - a["normals"]).abs().max()) > 1e-3
     # Chosen at export and read back; training never meters.
-    path = tmp_path / "inverse.safetensors"
-    _atomic_save_tensors(dict(net.state_dict()), path, {"kind": "inverse", "width": "4", "depth": "2", "res": "24",
-                                                         "lighting_solve": "map_relative", "meter_exposure": "1"})
+    path = save_weights(net, tmp_path / "inverse.safetensors", "inverse", lighting_solve="map_relative",
+                        meter_exposure="1")
     assert read_metadata(path)["meter_exposure"] == "1" and load_inverse(path).meter_exposure
     with pytest.raises(ValueError, match="meter_exposure"):
         InverseNet(4, 2, meter_exposure=1)

@@ -29,15 +29,7 @@ from learned.renderer_objectives import PHASE2_TERMS, downsample_masked
 from learned.train_renderer import RendererConfig, export_renderer, train_renderer
 from physrelight import image_model
 
-
-def _save(net: torch.nn.Module, path: Path, kind: str) -> Path:
-    """Export a module the way ``train export`` does (weights + kind/width/depth metadata)."""
-    from learned.checkpoint import _atomic_save_tensors
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _atomic_save_tensors(dict(net.state_dict()), path, {"kind": kind, "width": str(net.width),
-                                                        "depth": str(net.depth), "res": "24"})
-    return path
+from .conftest import save_weights
 
 
 @pytest.fixture(scope="module")
@@ -45,8 +37,8 @@ def frozen(tmp_path_factory, tiny_prior: Path) -> Path:
     """A weights folder with a tiny inverse network, ShadowNet and the tiny prior."""
     d = tmp_path_factory.mktemp("frozen")
     torch.manual_seed(11)
-    _save(InverseNet(4, 2), d / "inverse.safetensors", "inverse")
-    _save(ShadowNet(4, 2), d / "shadow.safetensors", "shadow")
+    save_weights(InverseNet(4, 2), d / "inverse.safetensors", "inverse")
+    save_weights(ShadowNet(4, 2), d / "shadow.safetensors", "shadow")
     shutil.copy(tiny_prior, d / "lighting_prior.npz")
     return d
 

@@ -181,4 +181,4 @@ def test_06_bad_arguments_fail_with_one_line(tmp_path, capsys) -> None:
     # A candidate's weights folder is checked before any rendering.
     rc = cli(["bench", "--quick", "--weights", str(tmp_path / "nowhere"), "-o", str(tmp_path / "o"), "--quiet"])
     assert rc != 0
-    assert "not a weights folder" in capsys.readouterr().err
+    assert "no weights folder" in capsys.readouterr().err

@@ -222,9 +222,6 @@ def run_bench(level: BenchLevel, data: str | Path | None, out_dir: str | Path, c
     """
     if threads < 1:
         raise ValueError(f"threads must be >= 1, got {threads}")
-    if weights is not None and not (Path(weights) / "inverse.safetensors").is_file():
-        # checked before minutes of rendering, not after
-        raise ValueError(f"--weights {str(weights)!r} is not a weights folder (no inverse.safetensors)")
     before = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
@@ -241,6 +238,7 @@ def _run(level: BenchLevel, data: str | Path | None, out_dir: str | Path, comman
     from ..common import machine
     from .report import write_report
 
+    relighter = Relighter.load(weights)  # first: a bad weights folder fails before minutes of rendering
     load_mitsuba(differentiable=with_abs)
     t_start = time.perf_counter()
     load_before = os.getloadavg()
@@ -255,7 +253,6 @@ def _run(level: BenchLevel, data: str | Path | None, out_dir: str | Path, comman
 
     phases = {"data": data_info["seconds"]}
     t0 = time.perf_counter()
-    relighter = Relighter.load(weights)
     methods = build_methods(relighter)
     runs: dict[str, MethodRun] = {}
     for name, m in methods.items():
