@@ -8,8 +8,9 @@ Sub-subcommands (heavy imports stay inside the handlers):
 * ``train evaluate --data DIR [--split all] [--weights DIR] [--reference-weights DIR]``: held-out
   metrics of shipped (or exported) weights next to the trivial baselines, with scene-bootstrap
   intervals of the per-photo means, as JSON (with a reference: paired differences too);
-* ``train export --inverse RUN --shadow RUN --dest DIR``: weights-only safetensors for
-  :meth:`learned.Relighter.load`.
+* ``train export --inverse RUN [--shadow RUN] --dest DIR [--fill-from DIR]``: weights-only
+  safetensors for :meth:`learned.Relighter.load` (the other pipeline files copied from a
+  complete folder, e.g. the shipped one, with ``--fill-from``).
 * ``train sky --data DIR --out RUN [--export PATH] [--evaluate DIR --json PATH]``: SkyGAN
   (:mod:`learned.train_sky`; reads ground-truth SH, not self-supervised), optionally exported
   and measured ("does the sky follow the SH") on held-out data;
@@ -32,6 +33,11 @@ import argparse
 import json
 
 from physrelight.cli import positive_int
+
+
+# What a weights folder for Relighter.load holds (the sky networks optional).
+PIPELINE_FILES = ("inverse.safetensors", "shadow.safetensors", "lighting_prior.npz", "renderer.safetensors",
+                  "sky_segmentation.safetensors", "sky_gan.safetensors")
 
 
 def _loss_weights(items: list[str] | None, defaults: dict[str, float]) -> dict[str, float]:
@@ -110,12 +116,23 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
+    import shutil
     from pathlib import Path
+
+    from physrelight import io
 
     from . import checkpoint as ckpt
 
     dest = Path(args.dest)
-    for kind, run, step in (("inverse", args.inverse, args.inverse_step), ("shadow", args.shadow, args.shadow_step)):
+    fill = Path(args.fill_from) if args.fill_from else None
+    if fill is not None and not fill.is_dir():
+        raise ValueError(f"--fill-from: no weights folder at {str(fill)!r}")
+    if args.shadow is None and args.shadow_step is not None:
+        raise ValueError("--shadow-step needs --shadow")
+    stages = [("inverse", args.inverse, args.inverse_step)]
+    if args.shadow is not None:
+        stages.append(("shadow", args.shadow, args.shadow_step))
+    for kind, run, step in stages:
         side = ckpt.checkpoint_at(run, step)
         extra = {}
         if kind == "inverse" and args.lighting_solve:
@@ -126,6 +143,13 @@ def _export(args: argparse.Namespace) -> int:
             extra["meter_exposure"] = "1"
         path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind, extra=extra or None)
         print(f"{kind}: {side} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
+    if fill is not None:
+        # A candidate folder for `--weights`: the exported networks, the rest as in FILL (e.g. the shipped ones).
+        for name in PIPELINE_FILES:
+            if not (dest / name).exists() and (fill / name).is_file():
+                with io.atomic_path(dest / name) as tmp:
+                    shutil.copyfile(fill / name, tmp)
+                print(f"{name}: {fill / name} -> {dest / name}")
     return 0
 
 
@@ -365,12 +389,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     ex = tsub.add_parser("export", help="write weights-only safetensors for Relighter.load")
     ex.add_argument("--inverse", required=True, help="inverse run folder")
-    ex.add_argument("--shadow", required=True, help="shadow run folder")
+    ex.add_argument("--shadow", default=None,
+                    help="shadow run folder (default: none exported; see --fill-from)")
     ex.add_argument("--inverse-step", type=positive_int, default=None,
                     help="inverse checkpoint step (default: the latest)")
     ex.add_argument("--shadow-step", type=positive_int, default=None,
                     help="ShadowNet checkpoint step (default: the latest)")
     ex.add_argument("--dest", default="learned/weights", help="destination folder (default: learned/weights)")
+    ex.add_argument("--fill-from", default=None, metavar="DIR",
+                    help="then copy from DIR each pipeline file DEST lacks (shadow, lighting prior, renderer, sky "
+                         "networks), e.g. learned/weights: a complete folder for --weights")
     ex.add_argument("--lighting-solve", choices=("project", "map", "map_relative"), default=None,
                     help="the lighting step the exported inverse network uses (default: the one it was trained with)")
     ex.add_argument("--mirror-average", action="store_true",

@@ -251,6 +251,15 @@ def test_08_exported_weights_load_offline_and_relight(tiny_dataset: Path, tiny_p
     assert main(args + ["--mirror-average", "--dest", str(tmp_path / "mir")]) == 0
     assert load_inverse(tmp_path / "mir" / "inverse.safetensors").mirror_average
     assert not load_inverse(dest / "inverse.safetensors").mirror_average
+    # A candidate folder from an inverse run alone: --fill-from copies the rest of a complete folder.
+    cand = tmp_path / "candidate"
+    inv_only = ["train", "export", "--inverse", str(tmp_path / "inv"), "--dest", str(cand)]
+    assert main(inv_only + ["--fill-from", str(dest)]) == 0
+    assert (cand / "shadow.safetensors").read_bytes() == (dest / "shadow.safetensors").read_bytes()
+    assert (cand / "lighting_prior.npz").read_bytes() == (dest / "lighting_prior.npz").read_bytes()
+    np.testing.assert_array_equal(Relighter.load(cand).decompose(photo)["albedo"], out["albedo"])
+    assert main(inv_only + ["--fill-from", str(tmp_path / "nowhere")]) == 2
+    assert main(inv_only + ["--shadow-step", "2"]) == 2
 
 
 def test_09_the_shipped_weights_load_without_arguments() -> None:
