@@ -35,11 +35,6 @@ import json
 from physrelight.cli import positive_int
 
 
-# What a weights folder for Relighter.load holds (the sky networks optional).
-PIPELINE_FILES = ("inverse.safetensors", "shadow.safetensors", "lighting_prior.npz", "renderer.safetensors",
-                  "sky_segmentation.safetensors", "sky_gan.safetensors")
-
-
 def _loss_weights(items: list[str] | None, defaults: dict[str, float]) -> dict[str, float]:
     """``defaults`` with the ``--loss-weight NAME=VALUE`` overrides applied (unknown names refused)."""
     weights = dict(defaults)
@@ -116,17 +111,14 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    import shutil
     from pathlib import Path
 
-    from physrelight import io
-
     from . import checkpoint as ckpt
+    from .relighter import fill_weights_folder
 
     dest = Path(args.dest)
-    fill = Path(args.fill_from) if args.fill_from else None
-    if fill is not None and not fill.is_dir():
-        raise ValueError(f"--fill-from: no weights folder at {str(fill)!r}")
+    if args.fill_from is not None and not Path(args.fill_from).is_dir():
+        raise ValueError(f"--fill-from: no weights folder at {args.fill_from!r}")
     if args.shadow is None and args.shadow_step is not None:
         raise ValueError("--shadow-step needs --shadow")
     stages = [("inverse", args.inverse, args.inverse_step)]
@@ -143,13 +135,9 @@ def _export(args: argparse.Namespace) -> int:
             extra["meter_exposure"] = "1"
         path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind, extra=extra or None)
         print(f"{kind}: {side} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
-    if fill is not None:
-        # A candidate folder for `--weights`: the exported networks, the rest as in FILL (e.g. the shipped ones).
-        for name in PIPELINE_FILES:
-            if not (dest / name).exists() and (fill / name).is_file():
-                with io.atomic_path(dest / name) as tmp:
-                    shutil.copyfile(fill / name, tmp)
-                print(f"{name}: {fill / name} -> {dest / name}")
+    if args.fill_from is not None:  # a candidate folder for `--weights`: the rest as in FILL_FROM
+        for name in fill_weights_folder(dest, args.fill_from):
+            print(f"{name}: {Path(args.fill_from) / name} -> {dest / name}")
     return 0
 
 

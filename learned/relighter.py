@@ -36,7 +36,7 @@ from .lighting import WEIGHTS_DIR, load_prior
 from .networks import InverseNet, ShadowNet
 from .objectives import decompose_and_solve
 
-__all__ = ["RELIGHT_METHODS", "SKY_TYPES", "Relighter", "dc_luminance", "match_exposure", "rotate_azimuth",
+__all__ = ["RELIGHT_METHODS", "SKY_TYPES", "WEIGHT_FILES", "Relighter", "fill_weights_folder", "dc_luminance", "match_exposure", "rotate_azimuth",
            "sun_lighting",
            "transfer_to_full_resolution", "working_resolution"]
 
@@ -101,6 +101,31 @@ def _rotation(world_to_camera: Any) -> torch.Tensor:
     if not torch.allclose(r @ r.T, torch.eye(3, dtype=torch.float64), atol=1e-4) or float(torch.det(r)) <= 0:
         raise ValueError("world_to_camera's rotation block must be a proper rotation")
     return r
+
+
+# The files of a weights folder, as Relighter.load reads them (the renderer and the sky networks optional).
+WEIGHT_FILES = ("inverse.safetensors", "shadow.safetensors", "lighting_prior.npz", "renderer.safetensors",
+                "sky_segmentation.safetensors", "sky_gan.safetensors")
+
+
+def fill_weights_folder(dest: str | os.PathLike, source: str | os.PathLike | None = None) -> list[str]:
+    """Copy into ``dest`` each of :data:`WEIGHT_FILES` that it lacks and ``source`` (a weights
+    folder; None = the shipped one) has, each atomically: a candidate's exported networks become a
+    complete folder for :meth:`Relighter.load`. Returns the names copied."""
+    import shutil
+
+    from physrelight import io
+
+    src = Path(source) if source is not None else WEIGHTS_DIR
+    if not src.is_dir():
+        raise FileNotFoundError(f"no weights folder at {str(src)!r}")
+    copied = []
+    for name in WEIGHT_FILES:
+        if not (Path(dest) / name).exists() and (src / name).is_file():
+            with io.atomic_path(Path(dest) / name) as tmp:
+                shutil.copyfile(src / name, tmp)
+            copied.append(name)
+    return copied
 
 
 class Relighter:

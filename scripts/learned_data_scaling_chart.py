@@ -28,18 +28,17 @@ import torch
 
 from learned import checkpoint as ckpt
 from learned.evaluate import evaluate_relighter
-from learned.relighter import WEIGHTS_DIR, Relighter
+from learned.relighter import Relighter, fill_weights_folder
 from physrelight.io import atomic_path, write_json
 
 GOALS = {"normal_mae_deg": 20.0}  # and albedo: 2x better than the photo (drawn per point)
 
 
 def export(sidecar: Path, dest: Path, mirror_average: bool) -> Path:
-    """``dest`` = the checkpoint's inverse network + the shipped ShadowNet and prior (a Relighter folder)."""
+    """``dest`` = the checkpoint's inverse network + the shipped ShadowNet, prior and the rest (a Relighter folder)."""
     extra = {"lighting_solve": "map_relative", **({"mirror_average": "1"} if mirror_average else {})}
     ckpt.export_weights(sidecar, dest / "inverse.safetensors", "inverse", extra=extra)
-    for name in ("shadow.safetensors", "lighting_prior.npz"):
-        (dest / name).write_bytes((WEIGHTS_DIR / name).read_bytes())
+    fill_weights_folder(dest)
     return dest
 
 
