@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence, TypeVar
 
 import numpy as np
 import torch
@@ -33,7 +34,20 @@ import torch.nn.functional as F
 from physrelight import camera, colour
 from synth.dataset import SynthDataset, to_chw
 
-__all__ = ["Batch", "PairSampler", "load_photo", "mirror_view", "resize_short_side", "resize_view"]
+__all__ = ["Batch", "PairSampler", "evenly_spread", "load_photo", "mirror_view", "resize_short_side", "resize_view"]
+
+T = TypeVar("T")
+
+
+def evenly_spread(items: Sequence[T], n: int | None) -> list[T]:
+    """``n`` of ``items`` spread evenly from the first to the last (all of them when ``n`` is None or
+    at least ``len(items)``): how evaluations cap their photos or cases without favouring the first
+    scenes. Deterministic (no sampling), so a capped figure is reproducible."""
+    if n is not None and n < 1:
+        raise ValueError(f"n must be >= 1 or None, got {n!r}")
+    if n is None or len(items) <= n:
+        return list(items)
+    return [items[i] for i in np.linspace(0, len(items) - 1, n).round().astype(int)]
 
 
 @dataclass

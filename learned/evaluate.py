@@ -60,7 +60,7 @@ from physrelight.stats import paired_bootstrap
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import photo_gain
 
-from .data import load_photo
+from .data import evenly_spread, load_photo
 from .objectives import solve_projected
 
 if TYPE_CHECKING:  # for the annotation only: evaluation does not load weights
@@ -193,9 +193,7 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
     items = ds.items
     if not items:
         raise ValueError(f"{str(root)!r} has no photos in split {split!r}")
-    if max_images is not None and len(items) > max_images:
-        idx = np.linspace(0, len(items) - 1, max_images).round().astype(int)
-        items = [items[i] for i in idx]
+    items = evenly_spread(items, max_images)
     mean_light = prior.mean.reshape(-1, 3).double()
     acc: dict[str, list[float]] = {k: [] for k in (
         "albedo_si_mse", "normal_mae_deg", "lighting_rel_err", "lighting_si_rel_err", "baseline_albedo_si_mse",

@@ -45,7 +45,7 @@ from physrelight.stats import paired_bootstrap
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import photo_gain
 
-from .data import load_photo
+from .data import evenly_spread, load_photo
 
 __all__ = ["METHODS", "evaluate_relight", "format_table", "relight_cases"]
 
@@ -122,9 +122,7 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
     cases = relight_cases(ds)
     if not cases:
         raise ValueError(f"{str(root)!r} has no relighting cases in split {split!r} (needs >= 2 lightings)")
-    if max_cases is not None and len(cases) > max_cases:
-        idx = np.linspace(0, len(cases) - 1, max_cases).round().astype(int)
-        cases = [cases[i] for i in idx]
+    cases = evenly_spread(cases, max_cases)
     pipelines = {m: (relight, m) for m in methods}
     if reference is not None:
         pipelines["reference"] = (reference, "proposed")

@@ -40,7 +40,7 @@ from synth.dataset import SynthDataset, to_chw
 from synth.photo import photo_gain
 
 from . import checkpoint as ckpt
-from .data import load_photo
+from .data import evenly_spread, load_photo
 from .discriminators import MultiscaleDiscriminator, feature_matching_loss, lsgan_loss
 from .networks import count_parameters
 from .sky_gan import LOG_EPS, SkyGenerator, condition_map, generate_sky, lighting_scale
@@ -130,8 +130,7 @@ class SkyData:
         items = ds.items
         if not items:
             raise ValueError(f"{str(root)!r} has no photos in split {split!r}")
-        if max_images is not None and len(items) > max_images:
-            items = [items[i] for i in np.linspace(0, len(items) - 1, max_images).round().astype(int)]
+        items = evenly_spread(items, max_images)
         from tqdm import tqdm
 
         images, skies, lights = [], [], []
@@ -471,8 +470,7 @@ def sky_follows_lighting(generator: SkyGenerator, root: str | Path, split: str =
     """
     ds = SynthDataset(root, split=split, mode="full")
     items = ds.items
-    if max_images is not None and len(items) > max_images:
-        items = [items[i] for i in np.linspace(0, len(items) - 1, max_images).round().astype(int)]
+    items = evenly_spread(items, max_images)
     if len(items) < 3:
         raise ValueError(f"need at least 3 photos in {str(root)!r} split {split!r}, got {len(items)}")
     photos, skies, ref_a, ref_b, fg_b, light_a, light_b = [], [], [], [], [], [], []

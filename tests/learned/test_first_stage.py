@@ -711,3 +711,20 @@ def test_23_a_metered_network_decomposes_a_photo_the_same_at_any_exposure(tiny_d
         InverseNet(4, 2, meter_exposure=1)
     with pytest.raises(ValueError, match="key"):
         metered(image, key=0.0)
+
+
+def test_24_a_capped_evaluation_spreads_its_picks_from_first_to_last() -> None:
+    """Evaluations cap photos / cases with :func:`learned.data.evenly_spread`: the first and last item
+    always, evenly between, no repeats; all items (a copy) when the cap is absent or not below the count."""
+    from learned.data import evenly_spread
+
+    items = list(range(10))
+    assert evenly_spread(items, 4) == [0, 3, 6, 9]
+    assert evenly_spread(items, 2) == [0, 9]
+    assert evenly_spread(items, 10) == items and evenly_spread(items, None) == items
+    assert evenly_spread(items, 50) is not items
+    picks = evenly_spread(list(range(1000)), 96)
+    assert len(set(picks)) == 96 and picks[0] == 0 and picks[-1] == 999
+    assert np.ptp(np.diff(picks)) <= 1  # even: gaps differ by at most one
+    with pytest.raises(ValueError, match="n must be"):
+        evenly_spread(items, 0)
