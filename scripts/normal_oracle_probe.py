@@ -14,7 +14,7 @@ normals back; if it lands near it, a bigger network or a higher resolution is th
 same on ``--train-images`` training photos (``train_`` prefixed: how well it fits what it saw).
 
     .venv/bin/python scripts/normal_oracle_probe.py --data data/train640 --heldout data/heldout --width 12 \\
-        --steps 8000 --eval-every 2000 --threads 1 --json runs/oracle_w12.json
+        --steps 24000 --eval-every 4000 --threads 1 --json docs/learned_normal_oracle_w12.json
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from tqdm import tqdm
 
 from learned.data import load_photo
 from learned.evaluate import evaluate
-from learned.lighting import load_prior
+from learned.lighting import WEIGHTS_DIR, load_prior
 from learned.networks import InverseNet, mirror_averaged
 from learned.objectives import decompose_and_solve
 from learned.train import load_inverse
@@ -88,7 +88,7 @@ def main() -> int:
     images, normals, masks = load_split(args.data, args.res, args.scenes)
     net = InverseNet(width=args.width, depth=args.depth)
     opt = torch.optim.Adam(net.parameters(), lr=args.lr)
-    shipped, prior = load_inverse("learned/weights/inverse.safetensors").eval(), load_prior()
+    shipped, prior = load_inverse(WEIGHTS_DIR / "inverse.safetensors").eval(), load_prior()
     rng = np.random.default_rng(args.seed)
     flip_x = torch.tensor([-1.0, 1.0, 1.0])[None, :, None, None]
     curve, seconds = [], 0.0
@@ -136,4 +136,7 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    try:
+        raise SystemExit(main())
+    except ValueError as e:  # a bad dataset path or content: one line, not a traceback
+        raise SystemExit(f"error: {e}")
