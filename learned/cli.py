@@ -68,6 +68,7 @@ def _config(args: argparse.Namespace, stage: str):
                        lighting_solve=getattr(args, "lighting_solve", "project"),
                        initial_shadow_logit=getattr(args, "initial_shadow_logit", 3.0),
                        mvs_stencil=getattr(args, "mvs_stencil", "central"), mirror=args.mirror,
+                       mvs_pooled=getattr(args, "mvs_pooled", False),
                        weights=weights, progress=not args.quiet)
 
 
@@ -355,6 +356,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     inv.add_argument("--mvs-stencil", choices=("central", "one_sided"), default="central",
                      help="normals of the MVS-like depth for the normal term: central differences (default) or "
                           "one-sided next to holes and edges (more supervised pixels)")
+    inv.add_argument("--mvs-pooled", action="store_true",
+                     help="take the normal term's MVS normals at the dataset's resolution and area-pool them to --res "
+                          "(the dataset's resolution must be a multiple of --res; e.g. a 128-px set trained at 64)")
     inv.set_defaults(handler=_train_inverse)
 
     sh = tsub.add_parser("shadow", help="ShadowNet on a trained inverse network")

@@ -34,7 +34,8 @@ import torch.nn.functional as F
 from physrelight import camera, colour
 from synth.dataset import SynthDataset, to_chw
 
-__all__ = ["Batch", "PairSampler", "evenly_spread", "load_photo", "mirror_view", "resize_short_side", "resize_view"]
+__all__ = ["Batch", "PairSampler", "evenly_spread", "load_photo", "mirror_view", "pooled_mvs_normals",
+           "resize_short_side", "resize_view"]
 
 T = TypeVar("T")
 
@@ -61,6 +62,10 @@ class Batch:
         K: ``(2B, 3, 3)`` intrinsics at the training resolution.
         world_to_camera: ``(2B, 4, 4)``.
         keys: ``[(scene, view, light)]`` of the ``2B`` photos.
+        mvs_normal, mvs_valid: ``(2B, 3, H, W)`` and ``(2B, 1, H, W)`` bool, the MVS normals taken at
+            the dataset's own resolution and pooled to the training one
+            (``PairSampler(mvs_pooled=True)``, :func:`pooled_mvs_normals`); None: :func:`mvs_normals`
+            takes them from ``depth`` at the training resolution.
     """
 
     image: torch.Tensor
@@ -69,6 +74,8 @@ class Batch:
     K: torch.Tensor
     world_to_camera: torch.Tensor
     keys: list[tuple[str, int, int]]
+    mvs_normal: torch.Tensor | None = None
+    mvs_valid: torch.Tensor | None = None
 
     @property
     def pairs(self) -> int:
@@ -154,16 +161,57 @@ def mirror_view(image: torch.Tensor, depth: torch.Tensor, sky: torch.Tensor, K: 
     return (image.flip(-1), depth.flip(-1), sky.flip(-1), k, m @ world_to_camera @ m)
 
 
-def load_photo(ds: SynthDataset, scene: str, view: int, light: int, res: int) -> dict[str, torch.Tensor]:
-    """One photo and its view data, linearised and resized (self-supervised keys only)."""
+def pooled_mvs_normals(depth: torch.Tensor, K: torch.Tensor, res: int, stencil: str = "central"
+                       ) -> tuple[torch.Tensor, torch.Tensor]:
+    """MVS normals taken at the depth's own resolution, then area-pooled to ``res``.
+
+    MVS runs on the full-size photos and the network on downsampled ones (the paper's setting):
+    the simulator's holes are a fixed number of pixels wide and its noise is per pixel, so normals
+    of the full-size depth, averaged over each training pixel, cover more of the foreground at the
+    accuracy of the low resolution than normals of the depth resized first (docs/learned.md,
+    "Would a higher resolution give more normal targets?").
+
+    Args:
+        depth: ``(1, S, S)`` MVS-like z-depth (0 = missing) at the dataset's resolution ``S``.
+        K: ``(3, 3)`` intrinsics at that resolution.
+        res: the training resolution; ``S`` must be a multiple of it.
+        stencil: as in :func:`physrelight.camera.normals_from_depth`.
+
+    Returns:
+        ``(3, res, res)`` unit normals (0 where invalid) and ``(1, res, res)`` bool, valid where at
+        least half of a pixel's ``(S / res)**2`` sub-pixels have an MVS normal. At ``S == res`` the
+        normals of ``depth`` itself.
+    """
+    if depth.ndim != 3 or depth.shape[0] != 1 or depth.shape[1] != depth.shape[2]:
+        raise ValueError(f"depth must have shape (1, S, S), got {tuple(depth.shape)}")
+    size = depth.shape[-1]
+    if not (isinstance(res, int) and res >= 1 and size % res == 0):
+        raise ValueError(f"the depth's resolution {size} must be a multiple of res, got res={res!r}")
+    n, ok = camera.normals_from_depth(depth[None], K[None], max_rel_jump=0.1, stencil=stencil)
+    k = size // res
+    if k > 1:
+        ok_share = F.avg_pool2d(ok.to(n.dtype), k)
+        n = F.normalize(F.avg_pool2d(n * ok, k), dim=1)
+        ok = ok_share >= 0.5
+        n = n * ok
+    return n[0], ok[0]
+
+
+def load_photo(ds: SynthDataset, scene: str, view: int, light: int, res: int,
+               mvs_pooled: bool = False, stencil: str = "central") -> dict[str, torch.Tensor]:
+    """One photo and its view data, linearised and resized (self-supervised keys only); with
+    ``mvs_pooled`` also ``"mvs_normal"`` / ``"mvs_valid"`` from :func:`pooled_mvs_normals`."""
     item = ds.load(scene, view, light, keys=("photo", "mvs_depth", "sky_mask", "K", "world_to_camera"))
     image = to_chw(colour.from_ldr(np.clip(item["photo"], 0.0, 1.0)))
     depth = to_chw(item["mvs_depth"])
     sky = to_chw(item["sky_mask"].astype(np.float32)) > 0.5
     K = torch.from_numpy(item["K"]).float()
+    extra = {}
+    if mvs_pooled:
+        extra["mvs_normal"], extra["mvs_valid"] = pooled_mvs_normals(depth, K, res, stencil)
     image, depth, sky, K = resize_view(image, depth, sky, K, res)
     return {"image": image, "depth": depth, "sky": sky, "K": K,
-            "world_to_camera": torch.from_numpy(item["world_to_camera"]).float()}
+            "world_to_camera": torch.from_numpy(item["world_to_camera"]).float(), **extra}
 
 
 class PairSampler:
@@ -178,16 +226,24 @@ class PairSampler:
         mirror: mirror each pair left-right with probability 1/2 (:func:`mirror_view`); the
             choice is a pure function of ``(seed, step, rank)`` like the pairs, drawn from its own
             stream, so the pairs are those of an unmirrored sampler.
+        mvs_pooled: batches carry MVS normals taken at the dataset's resolution and pooled to
+            ``res`` (:func:`pooled_mvs_normals`, with ``stencil``); the dataset's resolution must be
+            a multiple of ``res``.
     """
 
     def __init__(self, root: str | Path, split: str = "train", res: int = 64, seed: int = 0,
-                 cache: bool = True, mirror: bool = False) -> None:
+                 cache: bool = True, mirror: bool = False, mvs_pooled: bool = False,
+                 stencil: str = "central") -> None:
         if not (isinstance(res, int) and res >= 8):
             raise ValueError(f"res must be an integer >= 8, got {res!r}")
         self.ds = SynthDataset(root, split=split, mode="self_supervised")
         if not self.ds.scenes:
             raise ValueError(f"{str(root)!r} has no scenes in split {split!r}")
         self.res, self.seed, self.cache, self.mirror = res, seed, cache, bool(mirror)
+        self.mvs_pooled, self.stencil = bool(mvs_pooled), stencil
+        if self.mvs_pooled and int(self.ds.config["res"]) % res:
+            raise ValueError(f"mvs_pooled needs the dataset's resolution ({self.ds.config['res']}) to be a "
+                             f"multiple of res ({res})")
         self._cache: dict[tuple[str, int, int], dict[str, torch.Tensor]] = {}
         self.scenes = self.ds.scenes
         for s in self.scenes:
@@ -197,7 +253,7 @@ class PairSampler:
     def photo(self, key: tuple[str, int, int]) -> dict[str, torch.Tensor]:
         if key in self._cache:
             return self._cache[key]
-        p = load_photo(self.ds, *key, res=self.res)
+        p = load_photo(self.ds, *key, res=self.res, mvs_pooled=self.mvs_pooled, stencil=self.stencil)
         if self.cache:
             self._cache[key] = p
         return p
@@ -229,11 +285,24 @@ class PairSampler:
         keys = [p[0] for p in pairs] + [p[1] for p in pairs]
         items = [self.photo(k) for k in keys]
         flips = self.mirrored_pairs(batch_size, step, rank) * 2  # both photos of a pair together
-        names = ("image", "depth", "sky", "K", "world_to_camera")
-        items = [dict(zip(names, mirror_view(*(it[n] for n in names)))) if f else it for it, f in zip(items, flips)]
+        items = [_mirrored(it) if f else it for it, f in zip(items, flips)]
         stack = {name: torch.stack([it[name] for it in items]) for name in items[0]}
         return Batch(image=stack["image"], depth=stack["depth"], sky=stack["sky"], K=stack["K"],
-                     world_to_camera=stack["world_to_camera"], keys=keys)
+                     world_to_camera=stack["world_to_camera"], keys=keys, mvs_normal=stack.get("mvs_normal"),
+                     mvs_valid=stack.get("mvs_valid"))
+
+
+_VIEW_KEYS = ("image", "depth", "sky", "K", "world_to_camera")
+
+
+def _mirrored(photo: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """:func:`mirror_view` of one loaded photo, its pooled MVS normals (if any) mirrored with it."""
+    out = dict(zip(_VIEW_KEYS, mirror_view(*(photo[n] for n in _VIEW_KEYS))))
+    if "mvs_normal" in photo:
+        flip_x = photo["mvs_normal"].new_tensor([-1.0, 1.0, 1.0])[:, None, None]
+        out["mvs_normal"] = photo["mvs_normal"].flip(-1) * flip_x
+        out["mvs_valid"] = photo["mvs_valid"].flip(-1)
+    return out
 
 
 def mvs_normals(batch: Batch, stencil: str = "central") -> tuple[torch.Tensor, torch.Tensor]:
@@ -243,5 +312,7 @@ def mvs_normals(batch: Batch, stencil: str = "central") -> tuple[torch.Tensor, t
     ``"one_sided"`` (normals next to holes and edges too, see
     :func:`physrelight.camera.normals_from_depth`).
     """
+    if batch.mvs_normal is not None:  # taken at the dataset's resolution (PairSampler(mvs_pooled=True))
+        return batch.mvs_normal, batch.mvs_valid & ~batch.sky
     n, valid = camera.normals_from_depth(batch.depth, batch.K, max_rel_jump=0.1, stencil=stencil)
     return n, valid & ~batch.sky

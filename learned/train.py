@@ -113,6 +113,7 @@ class TrainConfig(RunConfig):
     initial_shadow_logit: float = 3.0
     mvs_stencil: str = "central"
     mirror: bool = False  # left-right mirrored pairs (learned.data.mirror_view); off in runs before it existed
+    mvs_pooled: bool = False  # MVS normals at the dataset's resolution, pooled (learned.data.pooled_mvs_normals)
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
 
@@ -136,6 +137,8 @@ class TrainConfig(RunConfig):
             raise ValueError(f"init {self.init!r} does not exist (a {self.stage} run folder or weights file)")
         if not isinstance(self.mirror, bool):
             raise ValueError(f"mirror must be True or False, got {self.mirror!r}")
+        if not isinstance(self.mvs_pooled, bool):
+            raise ValueError(f"mvs_pooled must be True or False, got {self.mvs_pooled!r}")
 
 
 def build_inverse(width: int, depth: int, seed: int) -> InverseNet:
@@ -347,7 +350,7 @@ def train(config: TrainConfig) -> dict[str, Any]:
     _barrier()
     prior = load_prior(config.prior)
     sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed,
-                          mirror=config.mirror)
+                          mirror=config.mirror, mvs_pooled=config.mvs_pooled, stencil=config.mvs_stencil)
     weights = LossWeights(**config.weights)
 
     torch.manual_seed(config.seed)

@@ -52,7 +52,9 @@ def test_01_the_training_loader_refuses_ground_truth(tiny_dataset: Path) -> None
             sampler.ds.load("scene_0000", 0, 0, keys=(key,))
     batch = sampler.batch(2, step=0)
     assert batch.image.shape == (4, 3, 24, 24) and batch.depth.shape == (4, 1, 24, 24)
-    assert set(vars(batch)) == {"image", "depth", "sky", "K", "world_to_camera", "keys"}
+    # Only what MVS and the cameras give; the optional normals are the MVS depth's own (None unless pooled).
+    assert set(vars(batch)) == {"image", "depth", "sky", "K", "world_to_camera", "keys", "mvs_normal", "mvs_valid"}
+    assert batch.mvs_normal is None and batch.mvs_valid is None
 
 
 def test_02_batches_are_a_function_of_seed_step_and_rank(tiny_dataset: Path) -> None:
@@ -728,3 +730,54 @@ def test_24_a_capped_evaluation_spreads_its_picks_from_first_to_last() -> None:
     assert np.ptp(np.diff(picks)) <= 1  # even: gaps differ by at most one
     with pytest.raises(ValueError, match="n must be"):
         evenly_spread(items, 0)
+
+
+def test_25_mvs_normals_taken_at_the_dataset_resolution_pool_to_the_training_one(tiny_dataset: Path) -> None:
+    """``PairSampler(mvs_pooled=True)``: the normal term's MVS normals come from the dataset's own
+    resolution, area-pooled (:func:`learned.data.pooled_mvs_normals`); on a plane the pooled normal is the
+    plane's, a sub-pixel hole costs a pixel only when half of it is missing, and mirroring carries them."""
+    from learned.data import _mirrored, mvs_normals, pooled_mvs_normals
+    from physrelight import camera
+
+    # A tilted plane n . X = c seen by a pinhole camera: every finite-difference normal is the same.
+    size, f = 24, 30.0
+    K = torch.tensor([[f, 0.0, size / 2], [0.0, f, size / 2], [0.0, 0.0, 1.0]])
+    v, u = torch.meshgrid(torch.arange(size) + 0.5, torch.arange(size) + 0.5, indexing="ij")
+    rays = torch.stack([(u - size / 2) / f, (v - size / 2) / f, torch.ones_like(u)])
+    plane = torch.nn.functional.normalize(torch.tensor([0.3, -0.2, -1.0]), dim=0)
+    depth = (-2.0 / (plane[:, None, None] * rays).sum(0))[None]
+    full, ok_full = camera.normals_from_depth(depth[None], K[None], max_rel_jump=0.1)
+    reference = full[0][:, ok_full[0, 0]].mean(1)
+    pooled, ok = pooled_mvs_normals(depth, K, 12)
+    assert pooled.shape == (3, 12, 12) and ok.shape == (1, 12, 12)
+    assert int(ok.sum()) >= 100  # interior: all of it; the border loses what the stencil loses
+    torch.testing.assert_close(pooled[:, ok[0]], reference[:, None].expand(3, int(ok.sum())), atol=1e-4, rtol=0)
+    # At the dataset's resolution it is the depth's own normals, bit for bit.
+    same, same_ok = pooled_mvs_normals(depth, K, size)
+    assert torch.equal(same_ok, ok_full[0]) and torch.equal(same[:, same_ok[0]], full[0][:, ok_full[0, 0]])
+    # A one-pixel hole column (dilated by the stencil) loses only the pooled pixels half-missing.
+    holed = depth.clone()
+    holed[..., 11] = 0.0
+    _, ok_full_h = camera.normals_from_depth(holed[None], K[None], max_rel_jump=0.1)
+    _, ok_h = pooled_mvs_normals(holed, K, 12)
+    share = torch.nn.functional.avg_pool2d(ok_full_h[0].float()[None], 2)[0]
+    assert torch.equal(ok_h, share >= 0.5) and int(ok_h.sum()) > int((share == 1).sum())
+    with pytest.raises(ValueError, match="multiple of res"):
+        pooled_mvs_normals(depth, K, 10)
+
+    sampler = PairSampler(tiny_dataset, split="all", res=12, mvs_pooled=True, mirror=True)
+    batch = sampler.batch(2, step=0)
+    assert batch.mvs_normal.shape == (4, 3, 12, 12) and batch.mvs_valid.dtype == torch.bool
+    norms = batch.mvs_normal.norm(dim=1, keepdim=True)
+    assert bool(batch.mvs_valid.any()) and torch.allclose(norms[batch.mvs_valid], torch.ones(1), atol=1e-5)
+    n, valid = mvs_normals(batch)
+    assert n is batch.mvs_normal and torch.equal(valid, batch.mvs_valid & ~batch.sky)
+    photo = sampler.photo(batch.keys[0])
+    mirrored = _mirrored(photo)
+    torch.testing.assert_close(mirrored["mvs_normal"][0], -photo["mvs_normal"][0].flip(-1))
+    torch.testing.assert_close(mirrored["mvs_normal"][1:], photo["mvs_normal"][1:].flip(-1))
+    assert torch.equal(mirrored["mvs_valid"], photo["mvs_valid"].flip(-1))
+    with pytest.raises(ValueError, match="multiple of res"):
+        PairSampler(tiny_dataset, split="all", res=10, mvs_pooled=True)
+    with pytest.raises(ValueError, match="mvs_pooled"):
+        TrainConfig(stage="inverse", data=str(tiny_dataset), out="x", mvs_pooled=1)
