@@ -3,10 +3,12 @@
 For each synth dataset given (the same scenes rendered at different ``--res``), over all its photos: the share
 of foreground pixels (not sky, valid true normal) with MVS-like depth, the share with a central-difference MVS
 normal (:func:`physrelight.camera.normals_from_depth`, ``max_rel_jump=0.1``, as the training's normal term and
-``train evaluate``'s MVS split use), and that normal's angular error against the true normal. Prints JSON.
+``train evaluate``'s MVS split use), and that normal's angular error against the true normal (``train
+evaluate``'s angle). Prints JSON.
 
-With ``--pool-to N`` the MVS normals are computed at the dataset's resolution and then area-pooled to N px (a
-pixel keeps the renormalised mean of its valid sub-pixel normals, if at least half of them are valid), and are
+With ``--pool-to N`` the MVS normals are computed at the dataset's resolution and then area-pooled to N px
+(:func:`learned.data.pooled_mvs_normals`, what ``train inverse --mvs-pooled`` trains on: a pixel keeps the
+renormalised mean of its valid sub-pixel normals, if at least half of them are valid), and are
 compared on N-px pixels with the true normals and sky resized as ``train evaluate`` resizes them (nearest).
 
     .venv/bin/python scripts/mvs_coverage_probe.py data/res64_probe data/res128_probe data/res256_probe
@@ -22,7 +24,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from physrelight import camera
+from learned.data import pooled_mvs_normals
+from learned.evaluate import _angle_map_deg
 from synth.dataset import SynthDataset, to_chw
 
 
@@ -32,30 +35,24 @@ def coverage(root: str, pool_to: int | None = None) -> dict[str, float]:
     if not ds.items:
         raise ValueError(f"{root!r} has no photos")
     res = int(ds.config["res"])
-    if pool_to is not None and (pool_to < 1 or res % pool_to):
-        raise ValueError(f"--pool-to must divide the dataset's resolution {res}, got {pool_to}")
-    k = res // pool_to if pool_to else 1
+    out_res = pool_to or res
     foreground = with_depth = with_normal = 0
     errors = []
     for it in ds.items:
         d = ds.load(it.scene, it.view, it.light, keys=("mvs_depth", "K", "normal", "sky_mask"))
         depth, normal = to_chw(d["mvs_depth"]), to_chw(d["normal"])
         sky = to_chw(d["sky_mask"].astype(np.float32))
-        mvs, ok = camera.normals_from_depth(depth[None], torch.from_numpy(d["K"]).float()[None], max_rel_jump=0.1)
-        if k > 1:  # mean of the valid sub-pixel normals; valid where at least half are
-            mvs = F.normalize(F.avg_pool2d(mvs * ok, k), dim=1)
-            ok = F.avg_pool2d(ok.float(), k) >= 0.5
-            size = (pool_to, pool_to)
-            depth = F.interpolate(depth[None], size=size, mode="nearest")[0]
-            normal = F.interpolate(normal[None], size=size, mode="nearest")[0]
-            sky = F.interpolate(sky[None], size=size, mode="nearest")[0]
+        # The training loader's own normals (at out_res == res: those of the depth itself).
+        mvs, ok = pooled_mvs_normals(depth, torch.from_numpy(d["K"]).float(), out_res)
+        if out_res != res:
+            depth, normal, sky = (F.interpolate(x[None], size=(out_res, out_res), mode="nearest")[0]
+                                  for x in (depth, normal, sky))
         fg = ~(sky > 0.5) & (normal.norm(dim=0, keepdim=True) > 0.5)
-        m = fg & ok[0]
+        m = fg & ok
         foreground += int(fg.sum())
         with_depth += int((fg & (depth > 0)).sum())
         with_normal += int(m.sum())
-        cos = (mvs[0] * torch.nn.functional.normalize(normal, dim=0)).sum(0, keepdim=True).clamp(-1, 1)
-        errors.append(torch.rad2deg(torch.acos(cos))[m].numpy())
+        errors.append(_angle_map_deg(mvs, normal)[m].numpy())
     e = np.concatenate(errors)
     return {"res": res, "pooled_to": pool_to, "photos": len(ds.items), "foreground_pixels": foreground,
             "with_mvs_depth": with_depth / foreground, "with_mvs_normal": with_normal / foreground,
