@@ -13,7 +13,9 @@ The protocol (shared with the benchmark):
   over the given source lighting;
 * **metrics** on the LDR images over the foreground (not sky, ground-truth normal valid):
   l1, SSIM (Wang et al., :func:`physrelight.metrics.ssim`), PSNR and CIEDE2000; mean over
-  the (source, target) cases;
+  the (source, target) cases. A case whose target is clipped to 1 on every foreground pixel
+  (an over-exposed target) is left out and counted (``"saturated_cases"``): it carries no
+  information, since any prediction at least as bright matches it exactly (PSNR ``inf``);
 * **is the difference real**: ``proposed`` minus each other method, per case, with a 95 %
   bootstrap interval that resamples whole scenes (:func:`physrelight.stats.paired_bootstrap`;
   a scene's cases share its geometry, so they are not independent).
@@ -47,7 +49,7 @@ from synth.photo import photo_gain
 
 from .data import evenly_spread, load_photo
 
-__all__ = ["METHODS", "evaluate_relight", "format_table", "relight_cases"]
+__all__ = ["METHODS", "evaluate_relight", "format_table", "informative_target", "relight_cases"]
 
 METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity")
 _REPORTED = (*METHODS, "reference")  # what a result may hold: the methods and a second pipeline's proposed
@@ -85,6 +87,13 @@ def load_case(ds: SynthDataset, scene: str, view: int, a: int, b: int, res: int)
             "source_sh": torch.from_numpy(src["sh"]["2"] * gain[None, :]).float()}
 
 
+def informative_target(target_ldr: torch.Tensor, fg: torch.Tensor) -> bool:
+    """False when the LDR target ``(3, H, W)`` is clipped to 1 in every channel of every
+    foreground pixel ``fg (1, H, W)``: such a case cannot rank methods (every prediction that
+    is bright enough is exact)."""
+    return bool((target_ldr[:, fg[0]] < 1.0).any())
+
+
 def _scores(pred: torch.Tensor, target: torch.Tensor, fg: torch.Tensor) -> dict[str, np.ndarray]:
     """Per-image l1, SSIM, PSNR, CIEDE2000 of LDR ``(B, 3, H, W)`` over ``fg (B, 1, H, W)``."""
     m = fg.float()
@@ -110,8 +119,9 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
             scored as the method ``"reference"``. None: no comparison.
 
     Returns:
-        ``{method: {"l1", "ssim", "psnr", "ciede2000"}, "cases": n}`` (means over cases;
-        PSNR is the mean of per-case dB) and, when ``proposed`` is among the methods,
+        ``{method: {"l1", "ssim", "psnr", "ciede2000"}, "cases": n, "saturated_cases": k}`` (means
+        over the n scored cases; PSNR is the mean of per-case dB; k cases left out because their
+        target is clipped on the whole foreground) and, when ``proposed`` is among the methods,
         ``"paired": {method: {metric: {"diff", "lo", "hi"}}}``: ``proposed - method``, its
         95 % scene-bootstrap interval (2000 resamples, seed 0) and ``"scenes"``.
     """
@@ -128,7 +138,7 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
         pipelines["reference"] = (reference, "proposed")
     acc: dict[str, dict[str, list[np.ndarray]]] = {m: {} for m in pipelines}
     scenes: list[str] = []
-    count = 0
+    count = saturated = 0
     from tqdm import tqdm
 
     r = 5  # SSIM needs mask pixels at least 5 px from the border
@@ -136,9 +146,13 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
         loaded = []
         for c in cases[start:start + batch_size]:
             case = load_case(ds, *c, res=res)
-            if bool(case["fg"][:, r:-r, r:-r].any()):
-                loaded.append(case)
-                scenes.append(c[0])
+            if not bool(case["fg"][:, r:-r, r:-r].any()):
+                continue
+            if not informative_target(case["target_ldr"], case["fg"]):
+                saturated += 1
+                continue
+            loaded.append(case)
+            scenes.append(c[0])
         if not loaded:
             continue
         batch = {k: torch.stack([c[k] for c in loaded]) for k in loaded[0]}
@@ -155,6 +169,7 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
     per_case = {m: {k: np.concatenate(v) for k, v in acc[m].items()} for m in pipelines}
     result: dict[str, dict | float] = {m: {k: float(np.mean(v)) for k, v in per_case[m].items()} for m in pipelines}
     result["cases"] = float(count)
+    result["saturated_cases"] = float(saturated)
     if "proposed" in methods and count:
         result["paired"] = {m: {k: paired_bootstrap(per_case["proposed"][k], v, groups=scenes)._asdict()
                                 for k, v in per_case[m].items()}
@@ -169,7 +184,9 @@ def format_table(result: dict) -> str:
         if m in result:
             v = result[m]
             lines.append(f"| {m} | {v['l1']:.4f} | {v['ssim']:.4f} | {v['psnr']:.2f} | {v['ciede2000']:.2f} |")
-    lines.append(f"\n{int(result['cases'])} cases")
+    lines.append(f"\n{int(result['cases'])} cases"
+                 + (f" ({int(result['saturated_cases'])} left out: target clipped on the whole foreground)"
+                    if result.get("saturated_cases") else ""))
     for m, per in result.get("paired", {}).items():
         cells = ", ".join(f"{name} {per[k]['diff']:+.4f} [{per[k]['lo']:+.4f}, {per[k]['hi']:+.4f}]"
                           for k, name in (("l1", "l1"), ("ssim", "SSIM"), ("psnr", "PSNR"), ("ciede2000", "CIEDE")))

@@ -274,3 +274,36 @@ def test_09_a_reference_pipeline_is_scored_on_the_same_cases_and_paired(tiny_dat
     assert "reference" in json.loads(out.read_text())
     assert main(["train", "evaluate-relight", "--data", str(tiny_dataset), "--weights", str(frozen), "--quiet",
                  "--reference-weights", str(tmp_path / "missing")]) != 0
+
+
+def test_10_a_target_clipped_on_the_whole_foreground_is_left_out_and_counted(tiny_dataset: Path, frozen: Path,
+                                                                              monkeypatch) -> None:
+    # An over-exposed target (1 on every foreground pixel) is matched exactly by any prediction at least
+    # as bright: its PSNR is inf and it cannot rank methods. It is left out of every method alike.
+    import learned.relight_eval as rev
+
+    pipe = Relighter.load(frozen)
+
+    def bright(image, sky, target, source, method):  # saturates everywhere: PSNR inf on a clipped target
+        return {"relit": torch.full_like(image, 50.0)}
+
+    base = evaluate_relight(bright, tiny_dataset, "all", 24, max_cases=4, reference=pipe.relight_linear)
+    assert base["saturated_cases"] == 0.0 and base["cases"] == 4.0
+    real = rev.load_case
+    first = rev.relight_cases(rev.SynthDataset(tiny_dataset, split="all", mode="full"))[0]
+
+    def clipped_first(ds, scene, view, a, b, res):
+        case = real(ds, scene, view, a, b, res)
+        if (scene, view, a, b) == first:
+            case["target_ldr"] = torch.where(case["fg"], torch.ones_like(case["target_ldr"]), case["target_ldr"])
+        return case
+
+    ds = rev.SynthDataset(tiny_dataset, split="all", mode="full")
+    assert rev.informative_target(real(ds, *first, 24)["target_ldr"], real(ds, *first, 24)["fg"])
+    assert not rev.informative_target(clipped_first(ds, *first, 24)["target_ldr"], real(ds, *first, 24)["fg"])
+    monkeypatch.setattr(rev, "load_case", clipped_first)
+    out = evaluate_relight(bright, tiny_dataset, "all", 24, max_cases=4, reference=pipe.relight_linear)
+    assert out["saturated_cases"] == 1.0 and out["cases"] == 3.0
+    assert np.isfinite(out["proposed"]["psnr"])  # without the rule: inf, and the paired bootstrap refuses
+    assert all(np.isfinite(v["diff"]) for v in out["paired"]["reference"].values())
+    assert "1 left out" in rev.format_table(out)
