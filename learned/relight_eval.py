@@ -15,7 +15,8 @@ The protocol (shared with the benchmark):
   l1, SSIM (Wang et al., :func:`physrelight.metrics.ssim`), PSNR and CIEDE2000; mean over
   the (source, target) cases. A case whose target is clipped to 1 on every foreground pixel
   (an over-exposed target) is left out and counted (``"saturated_cases"``): it carries no
-  information, since any prediction at least as bright matches it exactly (PSNR ``inf``);
+  information, since any prediction at least as bright matches it exactly (PSNR ``inf``).
+  The benchmark does not apply this rule (its data has no such target today);
 * **is the difference real**: ``proposed`` minus each other method, per case, with a 95 %
   bootstrap interval that resamples whole scenes (:func:`physrelight.stats.paired_bootstrap`;
   a scene's cases share its geometry, so they are not independent).

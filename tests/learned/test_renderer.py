@@ -290,7 +290,8 @@ def test_10_a_target_clipped_on_the_whole_foreground_is_left_out_and_counted(tin
     base = evaluate_relight(bright, tiny_dataset, "all", 24, max_cases=4, reference=pipe.relight_linear)
     assert base["saturated_cases"] == 0.0 and base["cases"] == 4.0
     real = rev.load_case
-    first = rev.relight_cases(rev.SynthDataset(tiny_dataset, split="all", mode="full"))[0]
+    ds = rev.SynthDataset(tiny_dataset, split="all", mode="full")
+    first = rev.relight_cases(ds)[0]
 
     def clipped_first(ds, scene, view, a, b, res):
         case = real(ds, scene, view, a, b, res)
@@ -298,9 +299,9 @@ def test_10_a_target_clipped_on_the_whole_foreground_is_left_out_and_counted(tin
             case["target_ldr"] = torch.where(case["fg"], torch.ones_like(case["target_ldr"]), case["target_ldr"])
         return case
 
-    ds = rev.SynthDataset(tiny_dataset, split="all", mode="full")
-    assert rev.informative_target(real(ds, *first, 24)["target_ldr"], real(ds, *first, 24)["fg"])
-    assert not rev.informative_target(clipped_first(ds, *first, 24)["target_ldr"], real(ds, *first, 24)["fg"])
+    case, clipped = real(ds, *first, 24), clipped_first(ds, *first, 24)
+    assert rev.informative_target(case["target_ldr"], case["fg"])
+    assert not rev.informative_target(clipped["target_ldr"], clipped["fg"])
     monkeypatch.setattr(rev, "load_case", clipped_first)
     out = evaluate_relight(bright, tiny_dataset, "all", 24, max_cases=4, reference=pipe.relight_linear)
     assert out["saturated_cases"] == 1.0 and out["cases"] == 3.0
