@@ -32,7 +32,7 @@ import torch
 import torch.nn.functional as F
 
 from physrelight import camera, colour
-from synth.dataset import SynthDataset, to_chw
+from synth.dataset import SynthDataset, mvs_intrinsics, to_chw
 
 __all__ = ["Batch", "PairSampler", "evenly_spread", "load_photo", "mirror_view", "pooled_mvs_normals",
            "resize_short_side", "resize_view"]
@@ -200,15 +200,26 @@ def pooled_mvs_normals(depth: torch.Tensor, K: torch.Tensor, res: int, stencil: 
 def load_photo(ds: SynthDataset, scene: str, view: int, light: int, res: int,
                mvs_pooled: bool = False, stencil: str = "central") -> dict[str, torch.Tensor]:
     """One photo and its view data, linearised and resized (self-supervised keys only); with
-    ``mvs_pooled`` also ``"mvs_normal"`` / ``"mvs_valid"`` from :func:`pooled_mvs_normals`."""
+    ``mvs_pooled`` also ``"mvs_normal"`` / ``"mvs_valid"`` from :func:`pooled_mvs_normals`, taken at
+    the MVS depth's own resolution (``ds.mvs_scale`` times the photo's).
+
+    A set written with ``--mvs-scale s`` has its depth brought to the photo's size by nearest
+    sampling first (sub-pixel ``(s i, s j)``, as :func:`resize_view` samples any depth it shrinks), so
+    ``"depth"`` always matches ``"image"`` and ``"K"``."""
     item = ds.load(scene, view, light, keys=("photo", "mvs_depth", "sky_mask", "K", "world_to_camera"))
     image = to_chw(colour.from_ldr(np.clip(item["photo"], 0.0, 1.0)))
     depth = to_chw(item["mvs_depth"])
     sky = to_chw(item["sky_mask"].astype(np.float32)) > 0.5
     K = torch.from_numpy(item["K"]).float()
+    if depth.shape[-2:] != tuple(s * ds.mvs_scale for s in image.shape[-2:]):
+        raise ValueError(f"{scene} view {view}: mvs_depth is {tuple(depth.shape[-2:])}, expected the photo's "
+                         f"{tuple(image.shape[-2:])} times the set's mvs_scale {ds.mvs_scale}")
     extra = {}
     if mvs_pooled:
-        extra["mvs_normal"], extra["mvs_valid"] = pooled_mvs_normals(depth, K, res, stencil)
+        extra["mvs_normal"], extra["mvs_valid"] = pooled_mvs_normals(depth, mvs_intrinsics(K, ds.mvs_scale), res,
+                                                                     stencil)
+    if ds.mvs_scale > 1:
+        depth = F.interpolate(depth[None], size=tuple(image.shape[-2:]), mode="nearest")[0]
     image, depth, sky, K = resize_view(image, depth, sky, K, res)
     return {"image": image, "depth": depth, "sky": sky, "K": K,
             "world_to_camera": torch.from_numpy(item["world_to_camera"]).float(), **extra}
@@ -226,9 +237,9 @@ class PairSampler:
         mirror: mirror each pair left-right with probability 1/2 (:func:`mirror_view`); the
             choice is a pure function of ``(seed, step, rank)`` like the pairs, drawn from its own
             stream, so the pairs are those of an unmirrored sampler.
-        mvs_pooled: batches carry MVS normals taken at the dataset's resolution and pooled to
-            ``res`` (:func:`pooled_mvs_normals`, with ``stencil``); the dataset's resolution must be
-            a multiple of ``res``.
+        mvs_pooled: batches carry MVS normals taken at the MVS depth's resolution (the dataset's times
+            its ``mvs_scale``) and pooled to ``res`` (:func:`pooled_mvs_normals`, with ``stencil``); that
+            resolution must be a multiple of ``res``.
     """
 
     def __init__(self, root: str | Path, split: str = "train", res: int = 64, seed: int = 0,
@@ -241,9 +252,10 @@ class PairSampler:
             raise ValueError(f"{str(root)!r} has no scenes in split {split!r}")
         self.res, self.seed, self.cache, self.mirror = res, seed, cache, bool(mirror)
         self.mvs_pooled, self.stencil = bool(mvs_pooled), stencil
-        if self.mvs_pooled and int(self.ds.config["res"]) % res:
-            raise ValueError(f"mvs_pooled needs the dataset's resolution ({self.ds.config['res']}) to be a "
-                             f"multiple of res ({res})")
+        depth_res = int(self.ds.config["res"]) * self.ds.mvs_scale
+        if self.mvs_pooled and depth_res % res:
+            raise ValueError(f"mvs_pooled needs the MVS depth's resolution ({depth_res}: the dataset's "
+                             f"{self.ds.config['res']} x mvs_scale {self.ds.mvs_scale}) to be a multiple of res ({res})")
         self._cache: dict[tuple[str, int, int], dict[str, torch.Tensor]] = {}
         self.scenes = self.ds.scenes
         for s in self.scenes:

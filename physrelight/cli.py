@@ -70,7 +70,7 @@ def _synth(args: argparse.Namespace) -> int:
         scenes=args.scenes, views=args.views, lights=args.lights, res=args.res, spp=args.spp, seed=args.seed,
         max_depth=args.max_depth, gbuffer_spp=args.gbuffer_spp, shadow_spp=args.shadow_spp,
         env_resolution=args.env_res, kinds=tuple(args.kinds), hdri_dir=args.hdri_dir,
-        glossy_fraction=args.glossy_fraction, trees=not args.no_trees)
+        glossy_fraction=args.glossy_fraction, trees=not args.no_trees, mvs_scale=args.mvs_scale)
     shard = writer.parse_shard(args.shard)
     summary = writer.write_dataset(args.output, config, shard, progress=not args.quiet)
     print(f"rendered {len(summary['rendered'])} scene(s), skipped {len(summary['skipped'])} finished, "
@@ -102,6 +102,9 @@ def _add_synth(sub: argparse._SubParsersAction) -> None:
                    help="lighting kinds to draw from")
     p.add_argument("--glossy-fraction", type=float, default=0.0, help="share of non-Lambertian materials")
     p.add_argument("--no-trees", action="store_true")
+    p.add_argument("--mvs-scale", type=positive_int, default=1,
+                   help="degrade the MVS depth from geometry at this many times the photo's resolution "
+                        "(every other file is unchanged; at most 4)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_synth)
 

@@ -34,6 +34,8 @@ def coverage(root: str, pool_to: int | None = None) -> dict[str, float]:
     ds = SynthDataset(root, split="all", mode="full")
     if not ds.items:
         raise ValueError(f"{root!r} has no photos")
+    if ds.mvs_scale != 1:  # its depth, normals and K would be at different resolutions
+        raise ValueError(f"{root!r} was written with --mvs-scale {ds.mvs_scale}; this probe reads sets without it")
     res = int(ds.config["res"])
     out_res = pool_to or res
     foreground = with_depth = with_normal = 0

@@ -361,6 +361,18 @@ def sample_views(
     return cams
 
 
+def scaled_camera(camera: Camera, scale: int) -> Camera:
+    """The same camera with ``scale`` times the pixels on each side: ``K[:2] * scale`` (corners at 0,
+    so pixel ``(u, v)`` of ``camera`` covers pixels ``[scale u, scale (u + 1))`` of the result)."""
+    if isinstance(scale, bool) or not isinstance(scale, (int, np.integer)) or scale < 1:
+        raise ValueError(f"scale must be an integer >= 1, got {scale!r}")
+    K, T = _single(camera)
+    K = np.array(K, dtype=np.float64)
+    K[:2] *= scale
+    return Camera(K=K, world_to_camera=np.array(T, dtype=np.float64), width=int(camera.width) * int(scale),
+                  height=int(camera.height) * int(scale))
+
+
 # --------------------------------------------------------------------------------------
 # Mitsuba
 # --------------------------------------------------------------------------------------

@@ -8,7 +8,9 @@ radiance, lighting, photo parameters) is asked for, so a training loop cannot us
 truth by accident. ``mode="full"`` (validation, benchmarks) exposes everything.
 
 Images come back as float32 numpy arrays ``(H, W, C)`` (``(H, W)`` for one channel);
-:func:`to_chw` turns them into the library's torch ``(C, H, W)``.
+:func:`to_chw` turns them into the library's torch ``(C, H, W)``. ``mvs_depth`` is
+``(s H, s W)`` with ``s`` = :attr:`SynthDataset.mvs_scale` (1 unless the set was written with
+``--mvs-scale``); its intrinsics are ``K[:2] * s`` (:func:`mvs_intrinsics`).
 """
 
 from __future__ import annotations
@@ -85,6 +87,7 @@ class SynthDataset:
         if manifest.get("format") != FORMAT or manifest.get("version") != VERSION:
             raise ValueError(f"{str(self.root)!r} is not a {FORMAT} v{VERSION} dataset")
         self.mode, self.split, self.config = mode, split, manifest["config"]
+        self.mvs_scale = int(self.config.get("mvs_scale", 1))  # absent from sets written before the option
         names = sorted(p.parent.name for p in self.root.glob("scene_*/scene.json"))
         self.scenes = [n for n in names if split == "all" or split_of(n, fractions) == split]
         self._records: dict[str, dict] = {}
@@ -181,6 +184,14 @@ class SynthDataset:
         """All ordered view pairs ``(a, b)``, ``a != b``, of a scene (for the multi-view losses)."""
         n = self.num_views(scene)
         return [(a, b) for a in range(n) for b in range(n) if a != b]
+
+
+def mvs_intrinsics(K: np.ndarray | torch.Tensor, mvs_scale: int) -> np.ndarray | torch.Tensor:
+    """Intrinsics ``(3, 3)`` of a view's ``mvs_depth`` from the photo's ``K``: ``K[:2] * mvs_scale``
+    (pixel corners at 0, see :func:`synth.cameras.scaled_camera`). A copy; ``K`` is not modified."""
+    out = K.clone() if isinstance(K, torch.Tensor) else np.array(K, dtype=np.float64)
+    out[:2] *= mvs_scale
+    return out
 
 
 def to_chw(image: np.ndarray) -> torch.Tensor:

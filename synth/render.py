@@ -100,13 +100,14 @@ def build_scene(spec: _scene.SceneSpec, views: list[Camera], lighting: Lighting,
     return mi.load_dict(d)
 
 
-def _film(scene: Any, integrator: Any, index: int, spp: int, seed: int) -> np.ndarray:
+def _film(scene: Any, integrator: Any, index: int | Any, spp: int, seed: int) -> np.ndarray:
     img = mi.render(scene, integrator=integrator, sensor=index, spp=spp, seed=seed)
     return np.array(img, dtype=np.float64)
 
 
-def render_geometry(scene: Any, index: int, camera: Camera, spp: int, seed: int) -> ViewBuffers:
-    """Geometry buffers of view ``index`` (see :class:`ViewBuffers`)."""
+def render_geometry(scene: Any, index: int | Any, camera: Camera, spp: int, seed: int) -> ViewBuffers:
+    """Geometry buffers of view ``index`` (see :class:`ViewBuffers`); ``index`` may also be a Mitsuba
+    sensor that is not the scene's (it must match ``camera``, as :func:`render_geometry_scaled` makes)."""
     h, w = camera.height, camera.width
     o, d = _cameras.camera_rays(camera)
     ray = mi.Ray3f(mi.Point3f(*[o[:, k].astype(np.float32) for k in range(3)]),
@@ -132,6 +133,14 @@ def render_geometry(scene: Any, index: int, camera: Camera, spp: int, seed: int)
     return ViewBuffers(albedo=albedo.astype(np.float32), normal=normal.astype(np.float32),
                        depth=depth.astype(np.float32), sky_mask=~hit, coverage=cov.astype(np.float32),
                        glossy=glossy.astype(np.float32))
+
+
+def render_geometry_scaled(scene: Any, camera: Camera, scale: int, spp: int, seed: int) -> ViewBuffers:
+    """Geometry buffers of ``camera`` at ``scale`` times its resolution (:func:`synth.cameras.scaled_camera`),
+    from a sensor of its own: what MVS depth at a multiple of the photo's resolution is degraded from."""
+    fine = _cameras.scaled_camera(camera, scale)
+    sensor = mi.load_dict(_cameras.to_mitsuba_sensor(fine, spp, mi, seed=seed))
+    return render_geometry(scene, sensor, fine, spp, seed)
 
 
 def render_radiance(scene: Any, index: int, spp: int, seed: int) -> np.ndarray:

@@ -10,7 +10,8 @@ Layout (format ``physrelight-synth``, version 1)::
     OUT/scene_0000/timing.json         seconds per phase (the only non-deterministic file)
     OUT/scene_0000/lights/light_YY/    env.exr (sky without the sun, world frame) + lighting.json
     OUT/scene_0000/view_XX/            albedo.exr, normal.exr (camera frame), depth.exr,
-                                       sky_mask.png (255 = sky), mvs_depth.exr (0 = missing),
+                                       sky_mask.png (255 = sky), mvs_depth.exr (0 = missing;
+                                       ``mvs_scale`` times the photo's size, see below),
                                        glossy_mask.png (255 = non-Lambertian material)
     OUT/scene_0000/view_XX/light_YY/   radiance.exr (path traced), shadow.exr,
                                        direct_shadow.exr, photo.png (the training input)
@@ -18,6 +19,13 @@ Layout (format ``physrelight-synth``, version 1)::
 ``shadow.exr`` is the visibility of the rendered (delta) sun averaged over the pixel when
 the lighting has a sun, and the direct-light shadow ratio ``int V L cos / int L cos``
 otherwise; ``direct_shadow.exr`` is the latter for every lighting.
+
+``mvs_scale`` (``--mvs-scale``, default 1) > 1 is the paper's setting of MVS run on full-size photos
+and the network on downsampled ones, without the downsampled photos' lower noise: every file is
+what the same configuration at ``mvs_scale`` 1 writes, byte for byte, except ``mvs_depth.exr``, which
+is degraded from a second geometry pass of the same cameras at ``mvs_scale`` times the resolution
+(intrinsics ``K[:2] * mvs_scale``). The simulator's holes and noise are per pixel, so such depth
+covers more of the scene at the photo's resolution (``learned.data.pooled_mvs_normals``).
 
 A scene is rendered into ``OUT/.scene_0000.partial`` and renamed when complete, so a
 killed run loses at most the scene in progress and never leaves a half-written scene
@@ -65,14 +73,18 @@ class SynthConfig:
     hdri_dir: str | None = None
     glossy_fraction: float = 0.0
     trees: bool = True
+    mvs_scale: int = 1
 
     def __post_init__(self) -> None:
-        for name in ("scenes", "views", "lights", "res", "spp", "max_depth", "gbuffer_spp", "shadow_spp"):
+        for name in ("scenes", "views", "lights", "res", "spp", "max_depth", "gbuffer_spp", "shadow_spp", "mvs_scale"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
         if self.res < 16:
             raise ValueError(f"res must be at least 16 pixels, got {self.res}")
+        if self.mvs_scale > 4:
+            raise ValueError(f"mvs_scale must be at most 4 (the MVS depth is mvs_scale**2 times the pixels), "
+                             f"got {self.mvs_scale}")
         if self.seed < 0:
             raise ValueError(f"seed must be non-negative, got {self.seed}")
         if not self.kinds or any(k not in KINDS for k in self.kinds):
@@ -85,6 +97,8 @@ class SynthConfig:
     def to_json(self) -> dict:
         d = dataclasses.asdict(self)
         d["kinds"] = list(self.kinds)
+        if self.mvs_scale == 1:  # left out at its default: datasets written before it keep their bytes
+            del d["mvs_scale"]
         return d
 
     def scene_json(self) -> dict:
@@ -220,7 +234,9 @@ def write_scene(root: Path, index: int, config: SynthConfig, on_unit=lambda: Non
                 geo = render.render_geometry(mscene, vi, cam, config.gbuffer_spp, _seed(seed, 5, vi) % (2**31))
                 timer.add("gbuffer", t)
                 t = time.perf_counter()
-                mvs_depth = mvs.degrade_depth(geo.depth, geo.albedo, np.random.default_rng(_seed(seed, 6, vi)))
+                mvs_geo = geo if config.mvs_scale == 1 else render.render_geometry_scaled(
+                    mscene, cam, config.mvs_scale, config.gbuffer_spp, _seed(seed, 5, vi) % (2**31))
+                mvs_depth = mvs.degrade_depth(mvs_geo.depth, mvs_geo.albedo, np.random.default_rng(_seed(seed, 6, vi)))
                 io.write_exr(vdir / "albedo.exr", geo.albedo)
                 io.write_exr(vdir / "normal.exr", geo.normal)
                 io.write_exr(vdir / "depth.exr", geo.depth)

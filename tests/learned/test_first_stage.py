@@ -27,7 +27,7 @@ from learned.train import TrainConfig, train
 from physrelight.lighting_prior import LightingPrior
 from synth.dataset import GroundTruthAccessError
 
-from .conftest import save_weights
+from .conftest import TINY, save_weights
 
 TINY_NET = dict(width=4, depth=2, res=24)
 
@@ -781,3 +781,41 @@ def test_25_mvs_normals_taken_at_the_dataset_resolution_pool_to_the_training_one
         PairSampler(tiny_dataset, split="all", res=10, mvs_pooled=True)
     with pytest.raises(ValueError, match="mvs_pooled"):
         TrainConfig(stage="inverse", data=str(tiny_dataset), out="x", mvs_pooled=1)
+
+
+def test_26_a_set_with_twice_the_mvs_resolution_gives_native_photos_and_more_normal_targets(
+        tiny_dataset: Path, tmp_path: Path) -> None:
+    """``synth --mvs-scale 2``: the loader hands out the native photos, bit for bit, with depth at their
+    size and intrinsics, and pooled MVS normals from the 2x depth that cover far more of the foreground
+    than normals of native-resolution MVS depth, and point where the true normals do."""
+    from learned.data import load_photo
+    from physrelight import camera
+    from synth import writer
+    from synth.dataset import SynthDataset, to_chw
+
+    writer.write_dataset(tmp_path, writer.SynthConfig(**TINY, mvs_scale=2), progress=False)
+    native = SynthDataset(tiny_dataset, split="all")
+    fine = SynthDataset(tmp_path, split="all")
+    truth = SynthDataset(tiny_dataset, split="all", mode="full")
+    foreground = covered_native = covered_fine = 0
+    errors = []
+    for it in native.items:
+        a = load_photo(native, it.scene, it.view, it.light, 24)
+        b = load_photo(fine, it.scene, it.view, it.light, 24, mvs_pooled=True)
+        assert torch.equal(a["image"], b["image"]) and torch.equal(a["K"], b["K"]) and torch.equal(a["sky"], b["sky"])
+        assert b["depth"].shape == a["depth"].shape == (1, 24, 24)
+        _, ok = camera.normals_from_depth(a["depth"][None], a["K"][None], max_rel_jump=0.1)
+        fg = ~a["sky"]
+        foreground += int(fg.sum())
+        covered_native += int((ok[0] & fg).sum())
+        valid = b["mvs_valid"] & fg
+        covered_fine += int(valid.sum())
+        n = to_chw(truth.load(it.scene, it.view, it.light, keys=("normal",))["normal"])
+        cos = (b["mvs_normal"] * n).sum(0, keepdim=True).clamp(-1, 1)
+        errors.append(torch.rad2deg(torch.acos(cos))[valid])
+    # Measured: 4 % of the foreground against 38 %, median error 3.4 deg (24-px scenes are mostly edges).
+    assert covered_fine > 3 * covered_native and covered_fine > 0.2 * foreground
+    assert float(torch.cat(errors).median()) < 6.0
+    PairSampler(tmp_path, split="all", res=16, mvs_pooled=True).batch(1, 0)  # 48 is a multiple of 16
+    with pytest.raises(ValueError, match="multiple of res"):
+        PairSampler(tmp_path, split="all", res=20, mvs_pooled=True)

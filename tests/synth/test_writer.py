@@ -149,3 +149,36 @@ def test_10_a_dataset_grows_to_the_bytes_of_the_larger_one_and_never_shrinks(dat
     assert "scenes" not in io.read_json(tmp_path / "scene_0000" / "scene.json")["config"]
     with pytest.raises(ValueError, match="grow, not shrink"):
         writer.write_dataset(tmp_path, writer.SynthConfig(**{**TINY, "scenes": 1}), progress=False)
+
+
+def test_11_mvs_scale_changes_the_mvs_depth_only_and_renders_it_at_that_multiple(dataset: Path, tmp_path: Path) -> None:
+    """``--mvs-scale 2``: every photo and ground-truth file has the bytes of the set without it; the MVS
+    depth is 2x the size, in the same cameras (``K[:2] * 2``), and agrees with the true depth."""
+    writer.write_dataset(tmp_path, writer.SynthConfig(**TINY, mvs_scale=2), progress=False)
+    plain, scaled = digest(dataset), digest(tmp_path)
+    assert plain.keys() == scaled.keys()
+    differ = {k for k in plain if plain[k] != scaled[k]}
+    assert differ == {"manifest.json"} | {f"scene_000{s}/{f}" for s in (0, 1) for f in
+                                         ["scene.json", "view_00/mvs_depth.exr", "view_01/mvs_depth.exr"]}
+    for s in ("scene_0000", "scene_0001"):
+        a, b = io.read_json(dataset / s / "scene.json"), io.read_json(tmp_path / s / "scene.json")
+        assert b["config"].pop("mvs_scale") == 2 and a == b  # only the recorded configuration differs
+    assert "mvs_scale" not in io.read_json(dataset / "manifest.json")["config"]  # old sets keep their bytes
+    ds = SynthDataset(tmp_path, split="all", mode="full")
+    assert ds.mvs_scale == 2 and SynthDataset(dataset, split="all").mvs_scale == 1
+    for v in range(2):
+        item = ds.load("scene_0000", v, 0, keys=("mvs_depth", "depth", "sky_mask"))
+        mvs, depth, sky = item["mvs_depth"], item["depth"], item["sky_mask"]
+        assert mvs.shape == (48, 48)
+        blocks = mvs.reshape(24, 2, 24, 2).transpose(0, 2, 1, 3).reshape(24, 24, 4)
+        full = np.all(blocks > 0, axis=-1) & ~sky  # every sub-pixel has MVS depth
+        assert full.sum() > 0.3 * (~sky).sum()
+        rel = np.abs(blocks[full].mean(-1) / depth[full] - 1)  # pixel-centre depth vs its four sub-pixels
+        assert np.median(rel) < 0.02
+        assert np.all(blocks[sky].min(-1) == 0)  # a sky pixel's centre sub-pixels see sky: no depth there
+
+
+def test_12_mvs_scale_is_checked(tmp_path: Path) -> None:
+    for bad in (0, 5, 1.5, True):
+        with pytest.raises(ValueError, match="mvs_scale"):
+            writer.SynthConfig(**TINY, mvs_scale=bad)
