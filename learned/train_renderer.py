@@ -213,6 +213,7 @@ def validate(renderer: NeuralRenderer, inverse: nn.Module, shadow_net: nn.Module
     result = evaluate_relight(pipe.relight_linear, root, config.val_split, config.res, config.val_images, methods)
     flat = {f"{m}_{k}": v for m in methods for k, v in result[m].items()}
     flat["cases"] = result["cases"]
+    flat["saturated_cases"] = result["saturated_cases"]  # left out (target clipped on the whole foreground)
     if panel is not None:
         write_relight_panel(panel, pipe, root, config.val_split, config.res)
     return flat

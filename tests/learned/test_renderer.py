@@ -180,6 +180,8 @@ def test_06_a_tiny_run_lowers_the_self_reconstruction_loss(tiny_dataset: Path, f
     assert all(r[k] == "nan" for r in log[:34] for k in PHASE2_TERMS)  # phase 1: self + cross only
     for key in ("proposed_l1", "proposed_ssim", "lambertian_sh_psnr", "shadownet_lambertian_l1"):
         assert np.isfinite(result["val"][key]), key
+    val = rows(tmp_path / "run" / "val.csv")[-1]  # the validation says how many cases it left out
+    assert float(val["saturated_cases"]) == 0.0 and float(val["cases"]) == result["val"]["cases"] >= 1
     assert (tmp_path / "run" / "panels" / "step_0000040.png").is_file()
     assert list((tmp_path / "run" / "tb").iterdir())
 
