@@ -32,7 +32,7 @@ import torch
 import torch.nn.functional as F
 
 from physrelight import camera, colour
-from synth.dataset import SynthDataset, mvs_intrinsics, to_chw
+from synth.dataset import SynthDataset, to_chw
 
 __all__ = ["Batch", "PairSampler", "evenly_spread", "load_photo", "mirror_view", "pooled_mvs_normals",
            "resize_short_side", "resize_view"]
@@ -122,9 +122,7 @@ def resize_view(image: torch.Tensor, depth: torch.Tensor, sky: torch.Tensor, K: 
                         align_corners=None if res < w else False)[0]
     d = F.interpolate(depth[None], size=(res, res), mode="nearest")[0]
     m = F.interpolate(sky[None].float(), size=(res, res), mode="nearest")[0] > 0.5
-    k = K.clone()
-    k[:2] *= s
-    return img, d, m, k
+    return img, d, m, camera.scale_intrinsics(K, s)
 
 
 _MIRROR_X = torch.diag(torch.tensor([-1.0, 1.0, 1.0, 1.0]))
@@ -216,8 +214,8 @@ def load_photo(ds: SynthDataset, scene: str, view: int, light: int, res: int,
                          f"{tuple(image.shape[-2:])} times the set's mvs_scale {ds.mvs_scale}")
     extra = {}
     if mvs_pooled:
-        extra["mvs_normal"], extra["mvs_valid"] = pooled_mvs_normals(depth, mvs_intrinsics(K, ds.mvs_scale), res,
-                                                                     stencil)
+        extra["mvs_normal"], extra["mvs_valid"] = pooled_mvs_normals(depth, camera.scale_intrinsics(K, ds.mvs_scale),
+                                                                     res, stencil)
     if ds.mvs_scale > 1:
         depth = F.interpolate(depth[None], size=tuple(image.shape[-2:]), mode="nearest")[0]
     image, depth, sky, K = resize_view(image, depth, sky, K, res)

@@ -69,6 +69,7 @@ __all__ = [
     "backproject",
     "intrinsics",
     "intrinsics_from_fov",
+    "scale_intrinsics",
     "invert_rigid",
     "look_at",
     "normals_from_depth",
@@ -249,6 +250,29 @@ def intrinsics_from_fov(fov_x_deg: Array, width: int, height: int) -> Array:
     cx = torch.full_like(f, width / 2.0)
     cy = torch.full_like(f, height / 2.0)
     return restore(intrinsics(f, f, cx, cy))
+
+
+def scale_intrinsics(K: Array, scale: float) -> Array:
+    """Intrinsics of the same camera with its image resized by ``scale`` on both axes.
+
+    With the top-left corner at ``(0, 0)`` a resize maps ``(u, v) -> (scale u, scale v)``, so
+    ``fx, fy, skew, cx, cy`` all scale: ``K[..., :2, :] * scale``.
+
+    Args:
+        K: ``(3, 3)`` or ``(B, 3, 3)``, numpy or torch.
+        scale: new size / old size, > 0 (e.g. 2 for an image twice as large).
+
+    Returns:
+        A scaled copy of the same type and shape; ``K`` is not modified.
+    """
+    if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(scale) or scale <= 0:
+        raise ValueError(f"scale must be a finite number > 0, got {scale!r}")
+    out = K.clone() if isinstance(K, torch.Tensor) else np.array(K, dtype=np.float64)
+    if out.shape[-2:] != (3, 3):
+        raise ValueError(f"K must have shape (3, 3) or (B, 3, 3), got {tuple(out.shape)}")
+    out[..., :2, :] *= scale
+    return out
 
 
 # --------------------------------------------------------------------------------------

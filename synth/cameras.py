@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from physrelight.camera import Camera, intrinsics_from_fov, look_at
+from physrelight.camera import Camera, intrinsics_from_fov, look_at, scale_intrinsics
 
 from .scene import SceneSpec
 
@@ -362,14 +362,12 @@ def sample_views(
 
 
 def scaled_camera(camera: Camera, scale: int) -> Camera:
-    """The same camera with ``scale`` times the pixels on each side: ``K[:2] * scale`` (corners at 0,
-    so pixel ``(u, v)`` of ``camera`` covers pixels ``[scale u, scale (u + 1))`` of the result)."""
+    """The same camera with ``scale`` times the pixels on each side (:func:`physrelight.camera.scale_intrinsics`:
+    pixel ``(u, v)`` of ``camera`` covers pixels ``[scale u, scale (u + 1))`` of the result)."""
     if isinstance(scale, bool) or not isinstance(scale, (int, np.integer)) or scale < 1:
         raise ValueError(f"scale must be an integer >= 1, got {scale!r}")
     K, T = _single(camera)
-    K = np.array(K, dtype=np.float64)
-    K[:2] *= scale
-    return Camera(K=K, world_to_camera=np.array(T, dtype=np.float64), width=int(camera.width) * int(scale),
+    return Camera(K=scale_intrinsics(K, int(scale)), world_to_camera=T, width=int(camera.width) * int(scale),
                   height=int(camera.height) * int(scale))
 
 

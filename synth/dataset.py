@@ -10,7 +10,7 @@ truth by accident. ``mode="full"`` (validation, benchmarks) exposes everything.
 Images come back as float32 numpy arrays ``(H, W, C)`` (``(H, W)`` for one channel);
 :func:`to_chw` turns them into the library's torch ``(C, H, W)``. ``mvs_depth`` is
 ``(s H, s W)`` with ``s`` = :attr:`SynthDataset.mvs_scale` (1 unless the set was written with
-``--mvs-scale``); its intrinsics are ``K[:2] * s`` (:func:`mvs_intrinsics`).
+``--mvs-scale``); its intrinsics are ``K[:2] * s`` (:func:`physrelight.camera.scale_intrinsics`).
 """
 
 from __future__ import annotations
@@ -184,14 +184,6 @@ class SynthDataset:
         """All ordered view pairs ``(a, b)``, ``a != b``, of a scene (for the multi-view losses)."""
         n = self.num_views(scene)
         return [(a, b) for a in range(n) for b in range(n) if a != b]
-
-
-def mvs_intrinsics(K: np.ndarray | torch.Tensor, mvs_scale: int) -> np.ndarray | torch.Tensor:
-    """Intrinsics ``(3, 3)`` of a view's ``mvs_depth`` from the photo's ``K``: ``K[:2] * mvs_scale``
-    (pixel corners at 0, see :func:`synth.cameras.scaled_camera`). A copy; ``K`` is not modified."""
-    out = K.clone() if isinstance(K, torch.Tensor) else np.array(K, dtype=np.float64)
-    out[:2] *= mvs_scale
-    return out
 
 
 def to_chw(image: np.ndarray) -> torch.Tensor:

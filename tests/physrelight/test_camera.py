@@ -640,3 +640,25 @@ def test_18_one_sided_normals_need_a_usable_neighbour_per_axis_and_skip_jumps(vi
             jump = np.abs(nd - d) > 0.2 * np.fmin(nd, d)
         clean &= ~np.isfinite(nd) | (nid == b["ids"]) | jump
     assert clean.sum() > 20 and ang[clean].max() < 1e-4, (clean.sum(), ang[clean].max())
+
+
+def test_19_scaled_intrinsics_project_to_the_scaled_pixel_coordinates() -> None:
+    """Resizing an image by s maps (u, v) -> (s u, s v) (corners at 0): the same point projects there
+    through ``scale_intrinsics(K, s)``, for numpy and torch, single and batched, and ``K`` is untouched."""
+    K = np.array([[50.0, 0.3, 31.0], [0.0, 48.0, 33.0], [0.0, 0.0, 1.0]])
+    points = torch.tensor([[[0.2, -0.4, 1.1], [0.1, 0.3, -0.2], [-2.0, -3.0, -4.0]]], dtype=torch.float64)
+    uv, _ = cam.project(points, torch.from_numpy(K))
+    for s in (2, 0.5, 3.0):
+        for k in (K, torch.from_numpy(K), torch.from_numpy(np.stack([K, K]))):
+            before = torch.as_tensor(k).clone()
+            scaled = cam.scale_intrinsics(k, s)
+            assert type(scaled) is type(k) and tuple(scaled.shape) == tuple(k.shape)
+            assert torch.equal(torch.as_tensor(k), before)
+            k1 = torch.as_tensor(scaled).reshape(-1, 3, 3)[:1]
+            uv_s, _ = cam.project(points, k1)
+            torch.testing.assert_close(uv_s, s * uv, rtol=0, atol=1e-12)
+    for bad in (0, -1.0, float("nan"), True):
+        with pytest.raises(ValueError, match="scale"):
+            cam.scale_intrinsics(K, bad)
+    with pytest.raises(ValueError, match="shape"):
+        cam.scale_intrinsics(np.eye(4), 2)
