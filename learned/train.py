@@ -341,16 +341,33 @@ def _warm_start(model: torch.nn.Module, config: TrainConfig) -> None:
 
 
 def train(config: TrainConfig) -> dict[str, Any]:
-    """Run (or resume) a training run; return the last validation metrics and timings."""
+    """Run (or resume) a training run; return the last validation metrics and timings.
+
+    Under ``torchrun`` the gloo process group is created here and destroyed before returning: a group left
+    to interpreter shutdown can abort a rank ("terminate called without an active exception") after all
+    its work is done, which fails the whole launch.
+    """
     torch.set_num_threads(config.threads)
+    owns_group = not dist.is_initialized()
     rank, world = _dist_setup()
+    try:
+        result = _train(config, rank, world)
+        _barrier()  # no rank tears the group down while another still talks to it
+        return result
+    finally:
+        if owns_group and dist.is_initialized():
+            dist.destroy_process_group()
+
+
+def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
     run = Path(config.out)
     if rank == 0:
         (run / "panels").mkdir(parents=True, exist_ok=True)
     _barrier()
     prior = load_prior(config.prior)
     sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed,
-                          mirror=config.mirror, mvs_pooled=config.mvs_pooled, stencil=config.mvs_stencil)
+                          mirror=config.mirror, mvs_pooled=config.mvs_pooled, stencil=config.mvs_stencil,
+                          degrade=config.degrade)
     weights = LossWeights(**config.weights)
 
     torch.manual_seed(config.seed)
