@@ -68,7 +68,7 @@ def _config(args: argparse.Namespace, stage: str):
                        lighting_solve=getattr(args, "lighting_solve", "project"),
                        initial_shadow_logit=getattr(args, "initial_shadow_logit", 3.0),
                        mvs_stencil=getattr(args, "mvs_stencil", "central"), mirror=args.mirror,
-                       mvs_pooled=getattr(args, "mvs_pooled", False),
+                       mvs_pooled=getattr(args, "mvs_pooled", False), degrade=getattr(args, "degrade", False),
                        weights=weights, progress=not args.quiet)
 
 
@@ -359,6 +359,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     inv.add_argument("--mvs-pooled", action="store_true",
                      help="take the normal term's MVS normals at the dataset's resolution and area-pool them to --res "
                           "(the dataset's resolution must be a multiple of --res; e.g. a 128-px set trained at 64)")
+    inv.add_argument("--degrade", action="store_true",
+                     help="augment: the network sees each photo with sensor noise, 8-bit quantisation and (half the "
+                          "time) JPEG put back at --res, drawn as synth draws them; losses and the lighting solve "
+                          "read the clean photo (learned.data.degrade_photo)")
     inv.set_defaults(handler=_train_inverse)
 
     sh = tsub.add_parser("shadow", help="ShadowNet on a trained inverse network")

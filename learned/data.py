@@ -19,6 +19,14 @@ scene under the mirror image of its lighting. Photos, MVS depth, sky, intrinsics
 mutually consistent, so every multi-view term (warps, relative rotations of the lighting) holds
 as before; it doubles the scene geometry a network sees (the held-out normal error of the
 shipped networks is twice their error on the training scenes: they memorise geometry).
+
+Optional augmentation (``PairSampler(degrade=True)``): the network sees each photo with a camera's
+nuisances put back at the training resolution (:func:`degrade_photo`: sensor noise, 8-bit
+quantisation, JPEG half the time, drawn as :func:`synth.photo.sample_photo_params` draws them),
+while every loss and the lighting solve read the clean photo. A photo area-downsampled from a
+higher-resolution set has half the native noise per halving and smoothed JPEG blocks; the held-out
+photos do not, and fine-tuning on such native photos directly cost lighting accuracy (docs/learned.md,
+the eleventh to thirteenth rules). Clean targets, degraded inputs.
 """
 
 from __future__ import annotations
@@ -27,14 +35,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence, TypeVar
 
+import dataclasses
+
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from physrelight import camera, colour
 from synth.dataset import SynthDataset, to_chw
+from synth.photo import PhotoParams, make_photo, sample_photo_params
 
-__all__ = ["Batch", "PairSampler", "evenly_spread", "load_photo", "mirror_view", "pooled_mvs_normals",
+__all__ = ["Batch", "PairSampler", "degrade_photo", "evenly_spread", "load_photo", "mirror_view", "pooled_mvs_normals",
            "resize_short_side", "resize_view"]
 
 T = TypeVar("T")
@@ -66,6 +77,9 @@ class Batch:
             the dataset's own resolution and pooled to the training one
             (``PairSampler(mvs_pooled=True)``, :func:`pooled_mvs_normals`); None: :func:`mvs_normals`
             takes them from ``depth`` at the training resolution.
+        network_image: ``(2B, 3, H, W)``, the photos the network sees (``PairSampler(degrade=True)``:
+            :func:`degrade_photo` of ``image``); None: the network sees ``image``. The losses and the
+            lighting solve always read ``image``.
     """
 
     image: torch.Tensor
@@ -76,6 +90,7 @@ class Batch:
     keys: list[tuple[str, int, int]]
     mvs_normal: torch.Tensor | None = None
     mvs_valid: torch.Tensor | None = None
+    network_image: torch.Tensor | None = None
 
     @property
     def pairs(self) -> int:
@@ -195,6 +210,31 @@ def pooled_mvs_normals(depth: torch.Tensor, K: torch.Tensor, res: int, stencil: 
     return n[0], ok[0]
 
 
+def degrade_photo(image: torch.Tensor, rng: np.random.Generator) -> tuple[torch.Tensor, PhotoParams]:
+    """A clean linear photo with a camera's nuisances put back at its own resolution.
+
+    The nuisances are drawn by :func:`synth.photo.sample_photo_params` (sensor noise
+    ``sigma ~ U(0, 0.01)`` in linear exposed units, JPEG at quality ``U{60..95}`` with probability
+    1/2) and applied by :func:`synth.photo.make_photo` with no exposure, white balance or curve
+    change (``ev = 0``, unit gains, the sRGB curve that :func:`load_photo` linearises with), so the
+    result is re-encoded, quantised to 8 bits, compressed and linearised again as a native photo is.
+
+    Args:
+        image: ``(3, H, W)`` linear photo in [0, 1] (as :func:`load_photo` gives it).
+        rng: the generator the nuisances are drawn from (same state, same bytes).
+
+    Returns:
+        ``(degraded, params)``: the degraded photo ``(3, H, W)`` float32 and what was applied.
+    """
+    if image.ndim != 3 or image.shape[0] != 3:
+        raise ValueError(f"degrade_photo expects image (3, H, W), got {tuple(image.shape)}")
+    hwc = image.detach().permute(1, 2, 0).double().numpy()
+    drawn = sample_photo_params(rng, hwc)
+    params = dataclasses.replace(drawn, ev=0.0, wb_gains=(1.0, 1.0, 1.0), curve="srgb")
+    u8 = make_photo(hwc, params, rng)
+    return to_chw(colour.from_ldr(u8)).float(), params
+
+
 def load_photo(ds: SynthDataset, scene: str, view: int, light: int, res: int,
                mvs_pooled: bool = False, stencil: str = "central") -> dict[str, torch.Tensor]:
     """One photo and its view data, linearised and resized (self-supervised keys only); with
@@ -238,18 +278,20 @@ class PairSampler:
         mvs_pooled: batches carry MVS normals taken at the MVS depth's resolution (the dataset's times
             its ``mvs_scale``) and pooled to ``res`` (:func:`pooled_mvs_normals`, with ``stencil``); that
             resolution must be a multiple of ``res``.
+        degrade: batches carry ``network_image``, each photo through :func:`degrade_photo` (after any
+            mirroring), drawn from a stream of ``(seed, step, rank)`` of its own; ``image`` stays clean.
     """
 
     def __init__(self, root: str | Path, split: str = "train", res: int = 64, seed: int = 0,
                  cache: bool = True, mirror: bool = False, mvs_pooled: bool = False,
-                 stencil: str = "central") -> None:
+                 stencil: str = "central", degrade: bool = False) -> None:
         if not (isinstance(res, int) and res >= 8):
             raise ValueError(f"res must be an integer >= 8, got {res!r}")
         self.ds = SynthDataset(root, split=split, mode="self_supervised")
         if not self.ds.scenes:
             raise ValueError(f"{str(root)!r} has no scenes in split {split!r}")
         self.res, self.seed, self.cache, self.mirror = res, seed, cache, bool(mirror)
-        self.mvs_pooled, self.stencil = bool(mvs_pooled), stencil
+        self.mvs_pooled, self.stencil, self.degrade = bool(mvs_pooled), stencil, bool(degrade)
         depth_res = int(self.ds.config["res"]) * self.ds.mvs_scale
         if self.mvs_pooled and depth_res % res:
             raise ValueError(f"mvs_pooled needs the MVS depth's resolution ({depth_res}: the dataset's "
@@ -297,9 +339,13 @@ class PairSampler:
         flips = self.mirrored_pairs(batch_size, step, rank) * 2  # both photos of a pair together
         items = [_mirrored(it) if f else it for it, f in zip(items, flips)]
         stack = {name: torch.stack([it[name] for it in items]) for name in items[0]}
+        network_image = None
+        if self.degrade:
+            rng = np.random.default_rng([self.seed, step, rank, 2])  # its own stream, like the mirroring's
+            network_image = torch.stack([degrade_photo(im, rng)[0] for im in stack["image"]])
         return Batch(image=stack["image"], depth=stack["depth"], sky=stack["sky"], K=stack["K"],
                      world_to_camera=stack["world_to_camera"], keys=keys, mvs_normal=stack.get("mvs_normal"),
-                     mvs_valid=stack.get("mvs_valid"))
+                     mvs_valid=stack.get("mvs_valid"), network_image=network_image)
 
 
 _VIEW_KEYS = ("image", "depth", "sky", "K", "world_to_camera")

@@ -122,7 +122,8 @@ def solve_projected(image: torch.Tensor, albedo: torch.Tensor, normals: torch.Te
 
 def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Tensor,
                         prior: LightingPrior, mirror_average: bool | None = None,
-                        meter_exposure: bool | None = None) -> dict[str, torch.Tensor]:
+                        meter_exposure: bool | None = None,
+                        network_input: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
     """Run the network and solve each photo's lighting.
 
     Args:
@@ -133,6 +134,9 @@ def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Te
             ``mirror_average`` (an inference choice made at export). Training passes False.
         meter_exposure: the network sees :func:`learned.networks.metered` photos (the lighting is
             solved against ``image`` as given); None = the network's own ``meter_exposure``.
+        network_input: ``(B, 3, H, W)``, what the network sees instead of ``image`` (a degraded copy in
+            training, :class:`learned.data.Batch` ``network_image``); the lighting is still solved against
+            ``image``. None: ``image``.
 
     Returns:
         ``albedo, normals, shadow`` as the network gives them, ``lighting_solved`` and
@@ -144,7 +148,12 @@ def decompose_and_solve(net: torch.nn.Module, image: torch.Tensor, sky: torch.Te
         mirror_average = getattr(module, "mirror_average", False)
     if meter_exposure is None:
         meter_exposure = getattr(module, "meter_exposure", False)
-    seen = metered(image) if meter_exposure else image
+    if network_input is None:
+        network_input = image
+    elif network_input.shape != image.shape:
+        raise ValueError(f"network_input must have the image's shape {tuple(image.shape)}, "
+                         f"got {tuple(network_input.shape)}")
+    seen = metered(network_input) if meter_exposure else network_input
     out = dict(mirror_averaged(net, seen) if mirror_average else net(seen))
     fg = (~sky).to(image.dtype)
     method = getattr(module, "lighting_solve", "project")
@@ -187,7 +196,8 @@ def inverse_losses(net: torch.nn.Module, batch: Batch, prior: LightingPrior,
         float, and the decomposition (see :func:`decompose_and_solve`).
     """
     image, sky = batch.image, batch.sky
-    out = decompose_and_solve(net, image, sky, prior, mirror_average=False, meter_exposure=False)
+    out = decompose_and_solve(net, image, sky, prior, mirror_average=False, meter_exposure=False,
+                              network_input=batch.network_image)
     fg = out["foreground"]
     albedo, normals, shadow = out["albedo"], out["normals"], out["shadow"]
 

@@ -114,6 +114,7 @@ class TrainConfig(RunConfig):
     mvs_stencil: str = "central"
     mirror: bool = False  # left-right mirrored pairs (learned.data.mirror_view); off in runs before it existed
     mvs_pooled: bool = False  # MVS normals at the dataset's resolution, pooled (learned.data.pooled_mvs_normals)
+    degrade: bool = False  # the network sees photos with camera nuisances put back (learned.data.degrade_photo)
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
 
@@ -139,6 +140,8 @@ class TrainConfig(RunConfig):
             raise ValueError(f"mirror must be True or False, got {self.mirror!r}")
         if not isinstance(self.mvs_pooled, bool):
             raise ValueError(f"mvs_pooled must be True or False, got {self.mvs_pooled!r}")
+        if not isinstance(self.degrade, bool):
+            raise ValueError(f"degrade must be True or False, got {self.degrade!r}")
 
 
 def build_inverse(width: int, depth: int, seed: int) -> InverseNet:

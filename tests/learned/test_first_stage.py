@@ -53,8 +53,9 @@ def test_01_the_training_loader_refuses_ground_truth(tiny_dataset: Path) -> None
     batch = sampler.batch(2, step=0)
     assert batch.image.shape == (4, 3, 24, 24) and batch.depth.shape == (4, 1, 24, 24)
     # Only what MVS and the cameras give; the optional normals are the MVS depth's own (None unless pooled).
-    assert set(vars(batch)) == {"image", "depth", "sky", "K", "world_to_camera", "keys", "mvs_normal", "mvs_valid"}
-    assert batch.mvs_normal is None and batch.mvs_valid is None
+    assert set(vars(batch)) == {"image", "depth", "sky", "K", "world_to_camera", "keys", "mvs_normal", "mvs_valid",
+                                "network_image"}
+    assert batch.mvs_normal is None and batch.mvs_valid is None and batch.network_image is None
 
 
 def test_02_batches_are_a_function_of_seed_step_and_rank(tiny_dataset: Path) -> None:
@@ -818,3 +819,67 @@ def test_26_a_set_with_twice_the_mvs_resolution_gives_native_photos_and_more_nor
     PairSampler(tmp_path, split="all", res=16, mvs_pooled=True).batch(1, 0)  # 48 is a multiple of 16
     with pytest.raises(ValueError, match="multiple of res"):
         PairSampler(tmp_path, split="all", res=20, mvs_pooled=True)
+
+
+def test_27_a_degraded_batch_shows_the_network_native_nuisances_and_the_losses_the_clean_photo(
+        tiny_dataset: Path, tiny_prior: Path, tmp_path: Path) -> None:
+    """``PairSampler(degrade=True)``: ``image`` stays the clean photo bit for bit and ``network_image`` is
+    a pure function of ``(seed, step, rank)``; on a flat grey photo the residual of :func:`degrade_photo`
+    without JPEG has no bias and the spread of the drawn noise plus 8-bit quantisation; the network sees
+    the degraded copy while the lighting is solved against the clean photo."""
+    from learned.data import degrade_photo
+    from learned.objectives import decompose_and_solve, solve_projected
+    from physrelight import colour
+
+    clean = PairSampler(tiny_dataset, split="all", res=24, seed=3).batch(2, 5)
+    aug = PairSampler(tiny_dataset, split="all", res=24, seed=3, degrade=True).batch(2, 5)
+    again = PairSampler(tiny_dataset, split="all", res=24, seed=3, degrade=True, cache=False).batch(2, 5)
+    assert clean.network_image is None and torch.equal(clean.image, aug.image)
+    assert torch.equal(aug.network_image, again.network_image)
+    assert aug.network_image.shape == aug.image.shape and not torch.equal(aug.network_image, aug.image)
+
+    level = 0.2
+    code = round(float(colour.to_ldr(np.float64(level))) * 255)
+    lsb = float(colour.from_ldr(np.float64((code + 1) / 255)) - colour.from_ldr(np.float64(code / 255)))
+    flat = torch.full((3, 64, 64), level)
+    rng = np.random.default_rng(0)
+    draws = [degrade_photo(flat, rng) for _ in range(40)]
+    assert 10 <= sum(p.jpeg_quality is not None for _, p in draws) <= 30  # half the time, as synth draws it
+    checked = 0
+    for out, p in draws:
+        assert out.dtype == torch.float32 and out.shape == flat.shape
+        assert p.ev == 0.0 and p.wb_gains == (1.0, 1.0, 1.0) and p.curve == "srgb" and 0 <= p.noise_sigma <= 0.01
+        r = (out - level).double()
+        if p.jpeg_quality is None and p.noise_sigma > 0.004:  # noise above the code step: quantisation is additive
+            expected = math.sqrt(p.noise_sigma ** 2 + lsb ** 2 / 12)
+            assert abs(float(r.std()) / expected - 1) < 0.05, (p, float(r.std()), expected)
+            assert abs(float(r.mean())) < 4 * expected / math.sqrt(r.numel()) + 0.02 * lsb
+            checked += 1
+    assert checked >= 5
+    with pytest.raises(ValueError, match=r"\(3, H, W\)"):
+        degrade_photo(torch.zeros(1, 8, 8), rng)
+
+    torch.manual_seed(0)
+    net = InverseNet(width=4, depth=2).eval()
+    prior = LightingPrior.load(tiny_prior)
+    fg = (~aug.sky).float()
+    with torch.no_grad():
+        dec = decompose_and_solve(net, aug.image, aug.sky, prior, mirror_average=False, meter_exposure=False,
+                                  network_input=aug.network_image)
+        seen = net(aug.network_image)
+        on_clean = solve_projected(aug.image, seen["albedo"], seen["normals"], seen["shadow"], fg, prior)[1]
+        on_degraded = solve_projected(aug.network_image, seen["albedo"], seen["normals"], seen["shadow"], fg, prior)[1]
+    assert torch.equal(dec["albedo"], seen["albedo"]) and torch.equal(dec["normals"], seen["normals"])
+    torch.testing.assert_close(dec["lighting"], on_clean)
+    assert float((on_clean - on_degraded).abs().max()) > 1e-4  # the two solves do differ
+    with pytest.raises(ValueError, match="network_input"):
+        decompose_and_solve(net, aug.image, aug.sky, prior, network_input=aug.network_image[:1])
+
+    # The run's flag reaches the sampler: the same step-0 network and pairs, another loss; and it is part of the
+    # run's identity (a resume cannot switch it).
+    for flag in (False, True):
+        train(config(tiny_dataset, tmp_path / f"d{flag}", tiny_prior, steps=1, ckpt_every=1, degrade=flag))
+    first = [float(rows(tmp_path / f"d{flag}" / "train.csv")[0]["total"]) for flag in (False, True)]
+    assert first[0] != first[1]
+    with pytest.raises(ValueError, match="another configuration"):
+        train(config(tiny_dataset, tmp_path / "dTrue", tiny_prior, steps=2, ckpt_every=1, degrade=False))
