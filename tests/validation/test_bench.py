@@ -155,6 +155,11 @@ def test_04_oracle_with_true_shading_and_shadow_is_the_image_model_and_units_fol
     np.testing.assert_allclose(shadowed[~sky], 0.5 * plain[~sky], rtol=1e-5)
     # Sky pixels are the input's.
     assert torch.equal(methods.Identity()(pair)[0][:, sky], pair.image()[0][:, sky])
+    # A target clipped on the whole foreground cannot rank methods: left out and named, not scored as inf dB.
+    view.radiance = [np.full((h, w, 3), 0.1, np.float32), np.full((h, w, 3), 50.0, np.float32)]
+    kept, left_out = protocols.informative_pairs(protocols.cross_pairs([view]))
+    assert [(p.source, p.target) for p in kept] == [(1, 0)]
+    assert left_out == [p.key for p in protocols.cross_pairs([view]) if p.target == 1]
 
 
 def test_05_sun_path_is_symmetric_about_noon_and_highest_there() -> None:

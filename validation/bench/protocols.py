@@ -176,6 +176,22 @@ def timelapse_pairs(views: Sequence[BenchView]) -> list[Pair]:
     return out
 
 
+def informative_pairs(pairs: Sequence[Pair]) -> tuple[list[Pair], list[str]]:
+    """The pairs that can rank methods, and the keys of those left out.
+
+    A pair whose display target is clipped to 1 in every channel of every foreground pixel
+    (:func:`learned.relight_eval.informative_target`, the relighting evaluation's definition)
+    scores any bright-enough output as exact: PSNR infinite, which would make every mean over it
+    infinite. Such pairs are left out and counted instead.
+    """
+    from learned.relight_eval import informative_target
+
+    kept, left_out = [], []
+    for p in pairs:
+        (kept if informative_target(p.target_display()[0], p.foreground()[0]) else left_out).append(p)
+    return kept, [p.key for p in left_out]
+
+
 def describe_pairs(pairs: Sequence[Pair]) -> dict[str, Any]:
     """Counts for the report: pairs, views, scenes per protocol and variant."""
     out: dict[str, Any] = {}

@@ -24,7 +24,7 @@ from physrelight import metrics
 
 from .data import BenchView, LightSpec, Recipe, load_dataset, render_recipes, timelapse_lights
 from .methods import ABS_NAME, AnalysisBySynthesis, Learned, OracleSH, build_methods
-from .protocols import VARIANTS, Pair, cross_pairs, describe_pairs, timelapse_pairs
+from .protocols import VARIANTS, Pair, cross_pairs, describe_pairs, informative_pairs, timelapse_pairs
 
 METRICS = ("l1", "mse", "ssim", "dssim", "psnr", "ciede2000")
 """Reported per pair, on foreground pixels of display values (sRGB, [0, 1])."""
@@ -247,8 +247,11 @@ def _run(level: BenchLevel, data: str | Path | None, out_dir: str | Path, comman
     if len({v.name for v in views}) != len(views):
         raise ValueError("view names must be unique: a data folder scene has the name of a generated one")
     variant_views = [v.name for v in views if v.view == 0 and v.group != "timelapse"][: level.variant_views]
-    cross = cross_pairs(views, VARIANTS, variant_views)
-    tl = timelapse_pairs(views)
+    cross, saturated = informative_pairs(cross_pairs(views, VARIANTS, variant_views))
+    tl, saturated_tl = informative_pairs(timelapse_pairs(views))
+    saturated += saturated_tl
+    if saturated:
+        progress(f"{len(saturated)} pairs left out: target clipped on the whole foreground")
     pairs = cross + tl  # cross first: an index into cross is an index into pairs
 
     phases = {"data": data_info["seconds"]}
@@ -316,7 +319,8 @@ def _run(level: BenchLevel, data: str | Path | None, out_dir: str | Path, comman
                     "load_average_after": [round(x, 2) for x in os.getloadavg()],
                     "shared": "the machine is shared with other jobs: timings are medians and indicative"},
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
-        "data": {**data_info, "views": len(views), "pairs": describe_pairs(pairs)},
+        "data": {**data_info, "views": len(views), "pairs": describe_pairs(pairs),
+                 "saturated_pairs": len(saturated), "saturated_pair_keys": saturated},
         "renderer_weights": relighter.renderer is not None, "phase_seconds": phases,
         "weights": "learned/weights" if weights is None else str(weights),
     }
