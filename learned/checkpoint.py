@@ -26,8 +26,8 @@ from safetensors.torch import save as serialize_tensors
 
 from physrelight import io
 
-__all__ = ["checkpoint_at", "export_weights", "latest_checkpoint", "load_checkpoint", "load_weights", "read_metadata", "resume",
-           "save_checkpoint"]
+__all__ = ["checkpoint_at", "checkpoints_between", "export_weights", "latest_checkpoint", "load_checkpoint", "load_weights",
+           "read_metadata", "resume", "save_checkpoint"]
 
 _NAME = re.compile(r"^step_(\d{7})\.json$")
 
@@ -120,6 +120,45 @@ def latest_checkpoint(run: str | Path) -> Path | None:
     return found[-1] if found else None
 
 
+def checkpoints_between(run: str | Path, first: int, last: int) -> list[Path]:
+    """Sidecars of ``run``'s complete checkpoints with ``first <= step <= last``, in step order;
+    ``ValueError`` naming the run and the range when fewer than two are there (nothing to average)."""
+    if first > last:
+        raise ValueError(f"checkpoint range {first}:{last} is empty (first step after last)")
+    d = Path(run) / "checkpoints"
+    found = sorted(p for p in d.iterdir() if _NAME.match(p.name) and p.with_suffix(".safetensors").is_file()
+                   and first <= int(_NAME.match(p.name).group(1)) <= last) if d.is_dir() else []
+    if len(found) < 2:
+        raise ValueError(f"{len(found)} checkpoint(s) of {str(run)!r} in steps {first}:{last}; averaging needs two or more")
+    return found
+
+
+def _averaged_tensors(sidecars: list[Path], head: str) -> dict[str, torch.Tensor]:
+    """The uniform mean of the ``head``-prefixed tensors of several checkpoints of one network.
+
+    Summed in float64 in the order given and cast back, so the same checkpoints give the same bytes.
+    Integer tensors (e.g. BatchNorm's batch counter) have no meaningful mean and are refused, as are
+    checkpoints whose tensor names or shapes differ."""
+    total: dict[str, torch.Tensor] = {}
+    dtypes: dict[str, torch.dtype] = {}
+    for side in sidecars:
+        tensors = {k: v for k, v in load_file(str(side.with_suffix(".safetensors"))).items() if k.startswith(head)}
+        if not total:
+            for k, v in tensors.items():
+                if not v.is_floating_point():
+                    raise ValueError(f"cannot average checkpoints: tensor {k!r} is {v.dtype}, not floating point")
+                total[k], dtypes[k] = v.to(torch.float64), v.dtype
+            continue
+        if tensors.keys() != total.keys():
+            raise ValueError(f"cannot average {side}: its tensors differ from {sidecars[0]}'s")
+        for k, v in tensors.items():
+            if v.shape != total[k].shape:
+                raise ValueError(f"cannot average {side}: {k!r} has shape {tuple(v.shape)}, "
+                                 f"{sidecars[0]} has {tuple(total[k].shape)}")
+            total[k] += v.to(torch.float64)
+    return {k: (v / len(sidecars)).to(dtypes[k]) for k, v in total.items()}
+
+
 def load_checkpoint(sidecar: str | Path, model: torch.nn.Module | None = None,
                     optimizer: Optimizers | None = None, restore_rng: bool = True) -> dict[str, Any]:
     """Load a checkpoint into ``model``/``optimizer`` (either may be None; ``optimizer`` as given
@@ -151,7 +190,8 @@ def load_checkpoint(sidecar: str | Path, model: torch.nn.Module | None = None,
 
 
 def export_weights(sidecar: str | Path, dest: str | Path, kind: str, submodule: str | None = None,
-                   strip_submodule: bool = True, extra: dict[str, str] | None = None) -> Path:
+                   strip_submodule: bool = True, extra: dict[str, str] | None = None,
+                   average: list[str | Path] | None = None) -> Path:
     """Write the model tensors of a checkpoint to ``dest`` (safetensors, weights only).
 
     The metadata records ``kind`` (e.g. "inverse", "shadow", "renderer"), ``width``,
@@ -162,13 +202,26 @@ def export_weights(sidecar: str | Path, dest: str | Path, kind: str, submodule: 
         submodule: export only this child of the checkpointed ``ModuleDict`` (e.g. ``"g"``,
             a GAN's generator: the discriminator is for training only); None = the whole model.
         strip_submodule: drop the ``"<submodule>."`` prefix from the tensor names.
+        average: export the uniform mean of these checkpoints' weights instead (stochastic weight
+            averaging; ``sidecar`` must be the last of them and gives the metadata, which adds
+            ``average_steps``). Only for networks without running statistics (ours use GroupNorm).
     """
     sidecar = Path(sidecar)
     meta = json.loads(sidecar.read_text())
     head = "model." if submodule is None else f"model.{submodule}."
     cut = len(head) if strip_submodule else len("model.")
-    tensors = {k[cut:]: v for k, v in load_file(str(sidecar.with_suffix(".safetensors"))).items()
-               if k.startswith(head)}
+    if average is None:
+        tensors = {k[cut:]: v for k, v in load_file(str(sidecar.with_suffix(".safetensors"))).items()
+                   if k.startswith(head)}
+    else:
+        sides = [Path(a) for a in average]
+        if not sides or sides[-1] != sidecar:
+            raise ValueError(f"average: {sidecar} must be the last of the averaged checkpoints")
+        configs = {json.dumps(json.loads(a.read_text())["config"], sort_keys=True) for a in sides}
+        if len(configs) > 1:
+            raise ValueError("cannot average checkpoints of different configurations (another run or size)")
+        tensors = {k[cut:]: v for k, v in _averaged_tensors(sides, head).items()}
+        extra = {**(extra or {}), "average_steps": ",".join(str(json.loads(a.read_text())["step"]) for a in sides)}
     cfg = meta["config"]
     info = {"kind": kind, "width": str(cfg["width"]), "depth": str(cfg["depth"]), "res": str(cfg["res"]),
             "step": str(meta["step"]), "train_seconds": f"{meta.get('train_seconds', 0.0):.1f}",

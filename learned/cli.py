@@ -35,6 +35,17 @@ import json
 from physrelight.cli import positive_int
 
 
+def _step_range(text: str) -> tuple[int, int]:
+    """argparse type: ``FIRST:LAST``, two positive steps with FIRST < LAST (one-line error otherwise)."""
+    first, sep, last = text.partition(":")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"expected FIRST:LAST steps, got {text!r}")
+    a, b = positive_int(first), positive_int(last)
+    if a >= b:
+        raise argparse.ArgumentTypeError(f"expected FIRST < LAST, got {text!r}")
+    return a, b
+
+
 def _loss_weights(items: list[str] | None, defaults: dict[str, float]) -> dict[str, float]:
     """``defaults`` with the ``--loss-weight NAME=VALUE`` overrides applied (unknown names refused)."""
     weights = dict(defaults)
@@ -122,11 +133,17 @@ def _export(args: argparse.Namespace) -> int:
         raise ValueError(f"--fill-from: no weights folder at {args.fill_from!r}")
     if args.shadow is None and args.shadow_step is not None:
         raise ValueError("--shadow-step needs --shadow")
+    if args.inverse_average is not None and args.inverse_step is not None:
+        raise ValueError("--inverse-average and --inverse-step exclude each other (the average ends at its last step)")
+    average = None
+    if args.inverse_average is not None:
+        first, last = args.inverse_average
+        average = ckpt.checkpoints_between(args.inverse, first, last)
     stages = [("inverse", args.inverse, args.inverse_step)]
     if args.shadow is not None:
         stages.append(("shadow", args.shadow, args.shadow_step))
     for kind, run, step in stages:
-        side = ckpt.checkpoint_at(run, step)
+        side = average[-1] if kind == "inverse" and average is not None else ckpt.checkpoint_at(run, step)
         extra = {}
         if kind == "inverse" and args.lighting_solve:
             extra["lighting_solve"] = args.lighting_solve
@@ -134,8 +151,10 @@ def _export(args: argparse.Namespace) -> int:
             extra["mirror_average"] = "1"
         if kind == "inverse" and args.meter_exposure:
             extra["meter_exposure"] = "1"
-        path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind, extra=extra or None)
-        print(f"{kind}: {side} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
+        mean_of = average if kind == "inverse" else None
+        path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind, extra=extra or None, average=mean_of)
+        source = f"mean of {len(mean_of)} checkpoints {mean_of[0].name}..{side.name}" if mean_of else str(side)
+        print(f"{kind}: {source} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")
     if args.fill_from is not None:  # a candidate folder for `--weights`: the rest as in FILL_FROM
         for name in fill_weights_folder(dest, args.fill_from):
             print(f"{name}: {Path(args.fill_from) / name} -> {dest / name}")
@@ -389,6 +408,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                     help="shadow run folder (default: none exported; see --fill-from)")
     ex.add_argument("--inverse-step", type=positive_int, default=None,
                     help="inverse checkpoint step (default: the latest)")
+    ex.add_argument("--inverse-average", type=_step_range, default=None, metavar="FIRST:LAST",
+                    help="export the uniform mean of the inverse run's checkpoints with FIRST <= step <= LAST "
+                         "(stochastic weight averaging; at least two)")
     ex.add_argument("--shadow-step", type=positive_int, default=None,
                     help="ShadowNet checkpoint step (default: the latest)")
     ex.add_argument("--dest", default="learned/weights", help="destination folder (default: learned/weights)")

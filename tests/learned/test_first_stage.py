@@ -883,3 +883,47 @@ def test_27_a_degraded_batch_shows_the_network_native_nuisances_and_the_losses_t
     assert first[0] != first[1]
     with pytest.raises(ValueError, match="another configuration"):
         train(config(tiny_dataset, tmp_path / "dTrue", tiny_prior, steps=2, ckpt_every=1, degrade=False))
+
+
+def test_28_an_averaged_export_is_the_mean_of_the_checkpoints_weights(tiny_dataset: Path, tiny_prior: Path,
+                                                                      tmp_path: Path) -> None:
+    from safetensors.torch import load_file
+
+    from learned.train import load_inverse
+    from physrelight.cli import main
+
+    run = tmp_path / "inv"
+    train(config(tiny_dataset, run, tiny_prior, steps=4, ckpt_every=1, val_every=4))
+    sides = ckpt.checkpoints_between(run, 2, 4)
+    assert [s.name for s in sides] == ["step_0000002.json", "step_0000003.json", "step_0000004.json"]
+    a = ckpt.export_weights(sides[-1], tmp_path / "a.safetensors", "inverse", average=sides)
+    b = ckpt.export_weights(sides[-1], tmp_path / "b.safetensors", "inverse", average=sides)
+    assert a.read_bytes() == b.read_bytes()  # the same checkpoints, the same bytes
+    averaged, meta = ckpt.load_weights(a)
+    assert meta["average_steps"] == "2,3,4" and meta["step"] == "4"
+    raw = [load_file(str(s.with_suffix(".safetensors"))) for s in sides]
+    assert averaged.keys() == {k[len("model."):] for k in raw[0] if k.startswith("model.")}
+    moved = 0
+    for name, value in averaged.items():
+        per = [r["model." + name].double() for r in raw]
+        torch.testing.assert_close(value.double(), sum(per) / 3, rtol=0, atol=1e-7)
+        moved += int(not torch.equal(per[0], per[-1]))
+    assert moved > 0  # training changed the weights, so the mean is not any one checkpoint
+    # The mean of one checkpoint taken twice is that checkpoint.
+    single = ckpt.load_weights(ckpt.export_weights(sides[-1], tmp_path / "s.safetensors", "inverse"))[0]
+    twice = ckpt.load_weights(ckpt.export_weights(sides[-1], tmp_path / "t.safetensors", "inverse",
+                                                  average=[sides[-1], sides[-1]]))[0]
+    assert all(torch.equal(single[k], twice[k]) for k in single)
+    assert load_inverse(a).width == TINY_NET["width"]
+    with pytest.raises(ValueError, match="averaging needs two or more"):
+        ckpt.checkpoints_between(run, 4, 9)
+    with pytest.raises(ValueError, match="must be the last"):
+        ckpt.export_weights(sides[0], tmp_path / "c.safetensors", "inverse", average=sides)
+    # The command line: --inverse-average FIRST:LAST gives the same file; bad ranges are refused in one line.
+    args = ["train", "export", "--inverse", str(run), "--dest", str(tmp_path / "cli")]
+    assert main(args + ["--inverse-average", "2:4"]) == 0
+    assert (tmp_path / "cli" / "inverse.safetensors").read_bytes() == a.read_bytes()
+    assert main(args + ["--inverse-average", "4:9"]) == 2
+    assert main(args + ["--inverse-average", "2:4", "--inverse-step", "4"]) == 2
+    with pytest.raises(SystemExit):
+        main(args + ["--inverse-average", "4:2"])
