@@ -80,6 +80,7 @@ def _config(args: argparse.Namespace, stage: str):
                        initial_shadow_logit=getattr(args, "initial_shadow_logit", 3.0),
                        mvs_stencil=getattr(args, "mvs_stencil", "central"), mirror=args.mirror,
                        mvs_pooled=getattr(args, "mvs_pooled", False), degrade=getattr(args, "degrade", False),
+                       degrade_under_ev=getattr(args, "degrade_under_ev", 0.0),
                        weights=weights, progress=not args.quiet)
 
 
@@ -382,6 +383,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="augment: the network sees each photo with sensor noise, 8-bit quantisation and (half the "
                           "time) JPEG put back at --res, drawn as synth draws them; losses and the lighting solve "
                           "read the clean photo (learned.data.degrade_photo)")
+    inv.add_argument("--degrade-under-ev", type=float, default=0.0, metavar="STOPS",
+                     help="with --degrade: half the time the photo is also taken up to STOPS under-exposed (uniform) "
+                          "and brought back after quantisation, as metering brings a dark photo back (default: 0)")
     inv.set_defaults(handler=_train_inverse)
 
     sh = tsub.add_parser("shadow", help="ShadowNet on a trained inverse network")

@@ -210,7 +210,8 @@ def pooled_mvs_normals(depth: torch.Tensor, K: torch.Tensor, res: int, stencil: 
     return n[0], ok[0]
 
 
-def degrade_photo(image: torch.Tensor, rng: np.random.Generator) -> tuple[torch.Tensor, PhotoParams]:
+def degrade_photo(image: torch.Tensor, rng: np.random.Generator,
+                  under_ev: float = 0.0) -> tuple[torch.Tensor, PhotoParams]:
     """A clean linear photo with a camera's nuisances put back at its own resolution.
 
     The nuisances are drawn by :func:`synth.photo.sample_photo_params` (sensor noise
@@ -219,20 +220,35 @@ def degrade_photo(image: torch.Tensor, rng: np.random.Generator) -> tuple[torch.
     change (``ev = 0``, unit gains, the sRGB curve that :func:`load_photo` linearises with), so the
     result is re-encoded, quantised to 8 bits, compressed and linearised again as a native photo is.
 
+    With ``under_ev > 0``, half the time the photo is first taken ``d ~ U(0, under_ev)`` stops under
+    (``params.ev = -d``: noise and quantisation act on the dark signal, as the benchmark's dark-input
+    stratum makes it) and brought back by ``2**d`` after linearising, as exposure metering
+    (:func:`learned.networks.metered`) brings an under-exposed photo back before the network.
+
     Args:
         image: ``(3, H, W)`` linear photo in [0, 1] (as :func:`load_photo` gives it).
         rng: the generator the nuisances are drawn from (same state, same bytes).
+        under_ev: the most stops of under-exposure drawn (0: none, and no extra draws, so the
+            bytes are those of a call without it).
 
     Returns:
         ``(degraded, params)``: the degraded photo ``(3, H, W)`` float32 and what was applied.
     """
     if image.ndim != 3 or image.shape[0] != 3:
         raise ValueError(f"degrade_photo expects image (3, H, W), got {tuple(image.shape)}")
+    if isinstance(under_ev, bool) or not (isinstance(under_ev, (int, float)) and 0 <= under_ev <= 8):
+        raise ValueError(f"under_ev must be a number of stops in [0, 8], got {under_ev!r}")
     hwc = image.detach().permute(1, 2, 0).double().numpy()
     drawn = sample_photo_params(rng, hwc)
-    params = dataclasses.replace(drawn, ev=0.0, wb_gains=(1.0, 1.0, 1.0), curve="srgb")
+    stops = 0.0
+    if under_ev > 0 and rng.uniform() < 0.5:
+        stops = float(rng.uniform(0.0, under_ev))
+    params = dataclasses.replace(drawn, ev=-stops, wb_gains=(1.0, 1.0, 1.0), curve="srgb")
     u8 = make_photo(hwc, params, rng)
-    return to_chw(colour.from_ldr(u8)).float(), params
+    linear = colour.from_ldr(u8)
+    if stops:
+        linear = linear * 2.0**stops
+    return to_chw(linear).float(), params
 
 
 def load_photo(ds: SynthDataset, scene: str, view: int, light: int, res: int,
@@ -280,11 +296,12 @@ class PairSampler:
             resolution must be a multiple of ``res``.
         degrade: batches carry ``network_image``, each photo through :func:`degrade_photo` (after any
             mirroring), drawn from a stream of ``(seed, step, rank)`` of its own; ``image`` stays clean.
+        degrade_under_ev: :func:`degrade_photo`'s ``under_ev`` (needs ``degrade``).
     """
 
     def __init__(self, root: str | Path, split: str = "train", res: int = 64, seed: int = 0,
                  cache: bool = True, mirror: bool = False, mvs_pooled: bool = False,
-                 stencil: str = "central", degrade: bool = False) -> None:
+                 stencil: str = "central", degrade: bool = False, degrade_under_ev: float = 0.0) -> None:
         if not (isinstance(res, int) and res >= 8):
             raise ValueError(f"res must be an integer >= 8, got {res!r}")
         self.ds = SynthDataset(root, split=split, mode="self_supervised")
@@ -292,6 +309,9 @@ class PairSampler:
             raise ValueError(f"{str(root)!r} has no scenes in split {split!r}")
         self.res, self.seed, self.cache, self.mirror = res, seed, cache, bool(mirror)
         self.mvs_pooled, self.stencil, self.degrade = bool(mvs_pooled), stencil, bool(degrade)
+        if degrade_under_ev and not self.degrade:
+            raise ValueError("degrade_under_ev needs degrade=True (it is one of degrade_photo's nuisances)")
+        self.degrade_under_ev = degrade_under_ev
         depth_res = int(self.ds.config["res"]) * self.ds.mvs_scale
         if self.mvs_pooled and depth_res % res:
             raise ValueError(f"mvs_pooled needs the MVS depth's resolution ({depth_res}: the dataset's "
@@ -342,7 +362,7 @@ class PairSampler:
         network_image = None
         if self.degrade:
             rng = np.random.default_rng([self.seed, step, rank, 2])  # its own stream, like the mirroring's
-            network_image = torch.stack([degrade_photo(im, rng)[0] for im in stack["image"]])
+            network_image = torch.stack([degrade_photo(im, rng, self.degrade_under_ev)[0] for im in stack["image"]])
         return Batch(image=stack["image"], depth=stack["depth"], sky=stack["sky"], K=stack["K"],
                      world_to_camera=stack["world_to_camera"], keys=keys, mvs_normal=stack.get("mvs_normal"),
                      mvs_valid=stack.get("mvs_valid"), network_image=network_image)

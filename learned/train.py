@@ -115,6 +115,7 @@ class TrainConfig(RunConfig):
     mirror: bool = False  # left-right mirrored pairs (learned.data.mirror_view); off in runs before it existed
     mvs_pooled: bool = False  # MVS normals at the dataset's resolution, pooled (learned.data.pooled_mvs_normals)
     degrade: bool = False  # the network sees photos with camera nuisances put back (learned.data.degrade_photo)
+    degrade_under_ev: float = 0.0  # and, half the time, up to this many stops under-exposed, metered back
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
 
@@ -142,6 +143,11 @@ class TrainConfig(RunConfig):
             raise ValueError(f"mvs_pooled must be True or False, got {self.mvs_pooled!r}")
         if not isinstance(self.degrade, bool):
             raise ValueError(f"degrade must be True or False, got {self.degrade!r}")
+        u = self.degrade_under_ev
+        if isinstance(u, bool) or not (isinstance(u, (int, float)) and 0 <= u <= 8):
+            raise ValueError(f"degrade_under_ev must be a number of stops in [0, 8], got {u!r}")
+        if u and not self.degrade:
+            raise ValueError("degrade_under_ev needs degrade (--degrade-under-ev is one of --degrade's nuisances)")
 
 
 def build_inverse(width: int, depth: int, seed: int) -> InverseNet:
@@ -370,7 +376,7 @@ def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
     prior = load_prior(config.prior)
     sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed,
                           mirror=config.mirror, mvs_pooled=config.mvs_pooled, stencil=config.mvs_stencil,
-                          degrade=config.degrade)
+                          degrade=config.degrade, degrade_under_ev=config.degrade_under_ev)
     weights = LossWeights(**config.weights)
 
     torch.manual_seed(config.seed)

@@ -927,3 +927,55 @@ def test_28_an_averaged_export_is_the_mean_of_the_checkpoints_weights(tiny_datas
     assert main(args + ["--inverse-average", "2:4", "--inverse-step", "4"]) == 2
     with pytest.raises(SystemExit):
         main(args + ["--inverse-average", "4:2"])
+
+
+def test_29_an_under_exposed_degradation_is_the_dark_photo_metered_back(tiny_dataset: Path, tiny_prior: Path,
+                                                                        tmp_path: Path) -> None:
+    """``degrade_photo(under_ev=E)``: half the time the photo is taken ``d ~ U(0, E)`` stops under and
+    multiplied back by ``2**d``; the residual on a flat grey then has no bias and the spread
+    ``2**d sqrt(sigma^2 + lsb(level 2**-d)^2 / 12)`` (noise and quantisation acting on the dark signal);
+    ``under_ev=0`` is the call without it, byte for byte."""
+    from learned.data import degrade_photo
+    from physrelight import colour
+
+    level = 0.2
+    flat = torch.full((3, 64, 64), level)
+    a, b = np.random.default_rng(4), np.random.default_rng(4)
+    for _ in range(6):
+        x, px = degrade_photo(flat, a)
+        y, py = degrade_photo(flat, b, under_ev=0.0)
+        assert torch.equal(x, y) and px == py
+
+    def lsb_at(v: float) -> float:
+        code = round(float(colour.to_ldr(np.float64(v))) * 255)
+        return float(colour.from_ldr(np.float64((code + 1) / 255)) - colour.from_ldr(np.float64(code / 255)))
+
+    rng = np.random.default_rng(1)
+    draws = [degrade_photo(flat, rng, under_ev=3.0) for _ in range(80)]
+    stops = [-p.ev for _, p in draws]
+    assert all(0.0 <= d <= 3.0 for d in stops) and 25 <= sum(d == 0.0 for d in stops) <= 55  # half the time
+    checked = 0
+    for out, p in draws:
+        d = -p.ev
+        r = (out - level).double()
+        if p.jpeg_quality is None and d > 1.0 and p.noise_sigma > 0.004:
+            dark = level * 2.0**-d
+            expected = 2.0**d * math.sqrt(p.noise_sigma ** 2 + lsb_at(dark) ** 2 / 12)
+            assert abs(float(r.std()) / expected - 1) < 0.06, (p, float(r.std()), expected)
+            assert abs(float(r.mean())) < 4 * expected / math.sqrt(r.numel()) + 0.02 * 2.0**d * lsb_at(dark)
+            checked += 1
+    assert checked >= 3
+    bright = [float((o - level).std()) for o, p in draws if p.jpeg_quality is None and -p.ev == 0.0]
+    darkest = [float((o - level).std()) for o, p in draws if p.jpeg_quality is None and -p.ev > 2.0]
+    assert bright and darkest and min(darkest) > float(np.median(bright))  # the dark photos lose more
+    for bad in (-1.0, 9.0, True):
+        with pytest.raises(ValueError, match="under_ev"):
+            degrade_photo(flat, rng, under_ev=bad)
+    with pytest.raises(ValueError, match="needs degrade"):
+        PairSampler(tiny_dataset, split="all", res=24, degrade_under_ev=2.0)
+    with pytest.raises(ValueError, match="needs degrade"):
+        config(tiny_dataset, tmp_path / "x", tiny_prior, degrade_under_ev=2.0)
+    # Part of the run's identity.
+    train(config(tiny_dataset, tmp_path / "u", tiny_prior, steps=1, ckpt_every=1, degrade=True, degrade_under_ev=3.0))
+    with pytest.raises(ValueError, match="another configuration"):
+        train(config(tiny_dataset, tmp_path / "u", tiny_prior, steps=2, ckpt_every=1, degrade=True))
