@@ -40,6 +40,14 @@ Metrics, each next to a trivial baseline:
   the same, and (``oracle_map_relative_``) its exposure-equivariant form (``relative=True``, the
   shipped network's ``map_relative`` step) fed the same.
 
+* **level error** (``level_err_stops``): every metric above is blind to the one scale that albedo
+  and lighting share, but a relit photo is not: the relighter brings the target lighting into the
+  decomposition's units by its DC level (:func:`learned.relighter.match_exposure`), so the relit
+  photo's brightness follows the level of albedo x lighting, ``mean_fg lum(albedo) * lum(DC of L)``,
+  against the truth's in photo units. Per photo ``|log2(level / level_gt)|`` in stops, clipped at 10
+  (:func:`level_log2_ratio`; ``level_log2_ratio`` is its signed mean: + = too bright). Invariant to
+  the ambiguity (``k albedo, L / k``); baseline: the linearised photo with the prior's mean.
+
 Ground truth is read with ``SynthDataset(mode="full")``; photos go through the same
 linearisation as in training.
 """
@@ -67,11 +75,14 @@ if TYPE_CHECKING:  # for the annotation only: evaluation does not load weights
     from .relighter import Relighter
 
 __all__ = ["PER_IMAGE_METRICS", "average_precision", "compare_decompositions", "evaluate", "evaluate_relighter",
-           "load_ground_truth", "normal_angle_deg", "scene_intervals", "shading_error", "si_mse"]
+           "level_log2_ratio", "load_ground_truth", "normal_angle_deg", "scene_intervals", "shading_error", "si_mse"]
 
 #: The per-photo metrics :func:`evaluate` can return one value per photo of (means over photos;
 #: shadow AP is pooled over pixels, so it has no per-photo value).
-PER_IMAGE_METRICS = ("normal_mae_deg", "albedo_si_mse", "lighting_shading_err", "lighting_si_rel_err")
+PER_IMAGE_METRICS = ("normal_mae_deg", "albedo_si_mse", "lighting_shading_err", "lighting_si_rel_err",
+                     "level_err_stops")
+
+_LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709, as physrelight.colour.LUMINANCE
 
 
 def si_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
@@ -134,6 +145,40 @@ def shading_error(lighting: torch.Tensor, target: torch.Tensor, normals: torch.T
     return float((alpha * a - b).norm() / b.norm().clamp_min(1e-30))
 
 
+def level_log2_ratio(albedo: torch.Tensor, lighting: torch.Tensor, true_albedo: torch.Tensor,
+                     true_lighting: torch.Tensor, mask: torch.Tensor, clip_stops: float = 10.0) -> float:
+    """``log2`` of the level of albedo x lighting against the truth's, in stops (+ = too bright).
+
+    The level is ``mean over mask of lum(albedo) * lum(DC of lighting)``: the one scale that a
+    photo leaves free between albedo and lighting cancels in it, so it measures the product that
+    a relight by DC level (:func:`learned.relighter.match_exposure`) carries into its output.
+
+    Args:
+        albedo, true_albedo: ``(3, H, W)``.
+        lighting, true_lighting: ``(9, 3)`` radiance SH, the truth in the photo's units.
+        mask: ``(1, H, W)`` bool, the foreground.
+        clip_stops: the ratio is clipped to ``[-clip_stops, clip_stops]``; an estimate with no
+            positive level (a lighting whose DC is not positive, as an untrained network can give)
+            counts as ``-clip_stops``, so one such photo weighs a bounded amount in a mean.
+
+    Raises:
+        ValueError: an empty mask, or a true level that is not positive.
+    """
+    if not bool(mask.any()):
+        raise ValueError("level_log2_ratio: empty mask")
+    lum = torch.tensor(_LUMINANCE, dtype=torch.float64)
+
+    def level(a: torch.Tensor, light: torch.Tensor) -> float:
+        return float((a.double()[:, mask[0]] * lum[:, None]).sum(0).mean() * (light.double()[0] * lum).sum())
+
+    est, true = level(albedo, lighting), level(true_albedo, true_lighting)
+    if not true > 0:
+        raise ValueError(f"level_log2_ratio: the true level must be positive, got {true!r}")
+    if not est > 0:
+        return -clip_stops
+    return min(max(math.log2(est / true), -clip_stops), clip_stops)
+
+
 def _lighting_errors(pred: torch.Tensor, gt: torch.Tensor) -> tuple[float, float]:
     p, g = pred.double().reshape(-1), gt.double().reshape(-1)
     raw = float((p - g).norm() / g.norm())
@@ -185,8 +230,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         ``oracle_lighting_shading_err``, ``oracle_map_lighting_shading_err``,
         ``oracle_map_relative_lighting_shading_err``), ``oracle_albedo_si_mse``,
         ``oracle_shadow_ap``, ``oracle_lighting_si_rel_err``, ``implied_albedo_si_mse`` (and
-        ``_true_lighting``, ``_true_normals_lighting``), the same with ``baseline_``
-        prefixed, ``shadow_positive_rate``, ``images``; with ``return_per_image`` the tuple
+        ``_true_lighting``, ``_true_normals_lighting``), ``level_err_stops`` and
+        ``level_log2_ratio``, the same with ``baseline_`` prefixed, ``shadow_positive_rate``, ``images``; with ``return_per_image`` the tuple
         ``(metrics, per_image)``.
     """
     ds = SynthDataset(root, split=split, mode="full")
@@ -203,7 +248,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                 "oracle_map_lighting_shading_err", "oracle_map_relative_lighting_shading_err",
                 "oracle_lighting_si_rel_err", "oracle_albedo_si_mse",
                 "implied_albedo_si_mse", "implied_albedo_si_mse_true_lighting",
-                "implied_albedo_si_mse_true_normals_lighting"):
+                "implied_albedo_si_mse_true_normals_lighting", "level_log2_ratio", "level_err_stops",
+                "baseline_level_err_stops"):
         acc[key] = []
     angles: list[np.ndarray] = []
     scene_of: list[str] = []
@@ -257,6 +303,11 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
                 raw, si = _lighting_errors(light, gt["lighting"])
                 acc[f"{name}lighting_rel_err"].append(raw)
                 acc[f"{name}lighting_si_rel_err"].append(si)
+            ratio = level_log2_ratio(out["albedo"][j], out["lighting"][j], gt["albedo"], gt["lighting"], fg)
+            acc["level_log2_ratio"].append(ratio)
+            acc["level_err_stops"].append(abs(ratio))
+            acc["baseline_level_err_stops"].append(abs(level_log2_ratio(image[j], mean_light, gt["albedo"],
+                                                                        gt["lighting"], fg)))
             im, alb, nrm, vis, m = image[j:j + 1], gt["albedo"][None], gt["normal"][None], gt["shadow"][None], \
                 fg[None].to(image.dtype)
             _, oracle = solve_projected(im, alb, nrm, vis, m, prior)

@@ -979,3 +979,48 @@ def test_29_an_under_exposed_degradation_is_the_dark_photo_metered_back(tiny_dat
     train(config(tiny_dataset, tmp_path / "u", tiny_prior, steps=1, ckpt_every=1, degrade=True, degrade_under_ev=3.0))
     with pytest.raises(ValueError, match="another configuration"):
         train(config(tiny_dataset, tmp_path / "u", tiny_prior, steps=2, ckpt_every=1, degrade=True))
+
+
+def test_30_the_level_error_sees_the_scale_of_albedo_times_lighting_and_only_that(tiny_dataset: Path,
+                                                                                  tiny_prior: Path) -> None:
+    """``level_log2_ratio``: 0 for the truth and for the truth rescaled along the albedo/lighting
+    ambiguity ``(k a, L / k)``, ``log2 k`` for ``(k a, L)``, blind to the SH beyond the DC; ``evaluate``
+    reports it per photo (0 for a perfect decomposition, 1 stop for its albedo doubled)."""
+    from learned.evaluate import compare_decompositions, evaluate, level_log2_ratio
+
+    g = torch.Generator().manual_seed(0)
+    albedo = torch.rand(3, 8, 8, generator=g, dtype=torch.float64) * 0.8 + 0.1
+    light = torch.randn(9, 3, generator=g, dtype=torch.float64) * 0.1
+    light[0] = torch.tensor([1.0, 0.9, 0.8])
+    mask = torch.zeros(1, 8, 8, dtype=torch.bool)
+    mask[:, 2:7, 1:6] = True
+    assert level_log2_ratio(albedo, light, albedo, light, mask) == 0.0
+    assert level_log2_ratio(3 * albedo, light / 3, albedo, light, mask) == pytest.approx(0.0, abs=1e-12)
+    assert level_log2_ratio(3 * albedo, light, albedo, light, mask) == pytest.approx(math.log2(3), rel=1e-12)
+    other = light.clone()
+    other[1:] = torch.randn(8, 3, generator=g, dtype=torch.float64)  # only the DC sets the level
+    assert level_log2_ratio(albedo, other, albedo, light, mask) == pytest.approx(0.0, abs=1e-12)
+    outside = albedo.clone()
+    outside[:, ~mask[0]] = 5.0  # pixels off the mask do not count
+    assert level_log2_ratio(outside, light, albedo, light, mask) == pytest.approx(0.0, abs=1e-12)
+    with pytest.raises(ValueError, match="empty mask"):
+        level_log2_ratio(albedo, light, albedo, light, torch.zeros_like(mask))
+    with pytest.raises(ValueError, match="positive"):
+        level_log2_ratio(albedo, light, albedo, -light, mask)
+    assert level_log2_ratio(albedo, -light, albedo, light, mask) == -10.0  # no level: clipped, not a crash
+    assert level_log2_ratio(albedo * 2.0**12, light, albedo, light, mask) == 10.0
+
+    prior = LightingPrior.load(tiny_prior)
+    truth, _ = _truth_decomposer(tiny_dataset)
+    m, per = evaluate(truth, tiny_dataset, "all", 24, prior, batch_size=3, return_per_image=True)
+    assert m["level_err_stops"] < 1e-6 and m["baseline_level_err_stops"] > 0.1  # the truth in float32
+    truth2, _ = _truth_decomposer(tiny_dataset)
+
+    def doubled(image: torch.Tensor, sky: torch.Tensor) -> dict[str, torch.Tensor]:
+        out = truth2(image, sky)
+        return {**out, "albedo": 2 * out["albedo"]}  # the si metrics cannot see this; the level can
+
+    m2, per2 = evaluate(doubled, tiny_dataset, "all", 24, prior, batch_size=3, return_per_image=True)
+    assert m2["level_log2_ratio"] == pytest.approx(1.0, abs=1e-6) and m2["albedo_si_mse"] < 1e-12
+    d = compare_decompositions(per2, per)["level_err_stops"]
+    assert d["diff"] == pytest.approx(1.0, abs=1e-6) and d["lo"] == pytest.approx(1.0, abs=1e-6)
