@@ -111,13 +111,20 @@ def checkpoint_at(run: str | Path, step: int | None = None) -> Path:
     return side
 
 
-def latest_checkpoint(run: str | Path) -> Path | None:
-    """Sidecar of the latest complete checkpoint in ``run``, or None."""
+def _complete_checkpoints(run: str | Path) -> list[tuple[int, Path]]:
+    """``(step, sidecar)`` of every complete checkpoint in ``run`` (sidecar and tensors both there), in
+    step order; empty when there is none."""
     d = Path(run) / "checkpoints"
     if not d.is_dir():
-        return None
-    found = sorted(p for p in d.iterdir() if _NAME.match(p.name) and p.with_suffix(".safetensors").is_file())
-    return found[-1] if found else None
+        return []
+    found = ((_NAME.match(p.name), p) for p in d.iterdir())
+    return sorted((int(m.group(1)), p) for m, p in found if m and p.with_suffix(".safetensors").is_file())
+
+
+def latest_checkpoint(run: str | Path) -> Path | None:
+    """Sidecar of the latest complete checkpoint in ``run``, or None."""
+    found = _complete_checkpoints(run)
+    return found[-1][1] if found else None
 
 
 def checkpoints_between(run: str | Path, first: int, last: int) -> list[Path]:
@@ -125,9 +132,7 @@ def checkpoints_between(run: str | Path, first: int, last: int) -> list[Path]:
     ``ValueError`` naming the run and the range when fewer than two are there (nothing to average)."""
     if first > last:
         raise ValueError(f"checkpoint range {first}:{last} is empty (first step after last)")
-    d = Path(run) / "checkpoints"
-    found = sorted(p for p in d.iterdir() if _NAME.match(p.name) and p.with_suffix(".safetensors").is_file()
-                   and first <= int(_NAME.match(p.name).group(1)) <= last) if d.is_dir() else []
+    found = [p for step, p in _complete_checkpoints(run) if first <= step <= last]
     if len(found) < 2:
         raise ValueError(f"{len(found)} checkpoint(s) of {str(run)!r} in steps {first}:{last}; averaging needs two or more")
     return found
@@ -217,11 +222,11 @@ def export_weights(sidecar: str | Path, dest: str | Path, kind: str, submodule: 
         sides = [Path(a) for a in average]
         if not sides or sides[-1] != sidecar:
             raise ValueError(f"average: {sidecar} must be the last of the averaged checkpoints")
-        configs = {json.dumps(json.loads(a.read_text())["config"], sort_keys=True) for a in sides}
-        if len(configs) > 1:
+        metas = [json.loads(a.read_text()) for a in sides]
+        if len({json.dumps(m["config"], sort_keys=True) for m in metas}) > 1:
             raise ValueError("cannot average checkpoints of different configurations (another run or size)")
         tensors = {k[cut:]: v for k, v in _averaged_tensors(sides, head).items()}
-        extra = {**(extra or {}), "average_steps": ",".join(str(json.loads(a.read_text())["step"]) for a in sides)}
+        extra = {**(extra or {}), "average_steps": ",".join(str(m["step"]) for m in metas)}
     cfg = meta["config"]
     info = {"kind": kind, "width": str(cfg["width"]), "depth": str(cfg["depth"]), "res": str(cfg["res"]),
             "step": str(meta["step"]), "train_seconds": f"{meta.get('train_seconds', 0.0):.1f}",

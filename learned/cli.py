@@ -136,15 +136,14 @@ def _export(args: argparse.Namespace) -> int:
         raise ValueError("--shadow-step needs --shadow")
     if args.inverse_average is not None and args.inverse_step is not None:
         raise ValueError("--inverse-average and --inverse-step exclude each other (the average ends at its last step)")
-    average = None
+    average = None  # the inverse run's checkpoints to average, the last of which gives the metadata
     if args.inverse_average is not None:
-        first, last = args.inverse_average
-        average = ckpt.checkpoints_between(args.inverse, first, last)
-    stages = [("inverse", args.inverse, args.inverse_step)]
+        average = ckpt.checkpoints_between(args.inverse, *args.inverse_average)
+    stages = [("inverse", args.inverse, args.inverse_step, average)]
     if args.shadow is not None:
-        stages.append(("shadow", args.shadow, args.shadow_step))
-    for kind, run, step in stages:
-        side = average[-1] if kind == "inverse" and average is not None else ckpt.checkpoint_at(run, step)
+        stages.append(("shadow", args.shadow, args.shadow_step, None))
+    for kind, run, step, mean_of in stages:
+        side = mean_of[-1] if mean_of else ckpt.checkpoint_at(run, step)
         extra = {}
         if kind == "inverse" and args.lighting_solve:
             extra["lighting_solve"] = args.lighting_solve
@@ -152,7 +151,6 @@ def _export(args: argparse.Namespace) -> int:
             extra["mirror_average"] = "1"
         if kind == "inverse" and args.meter_exposure:
             extra["meter_exposure"] = "1"
-        mean_of = average if kind == "inverse" else None
         path = ckpt.export_weights(side, dest / f"{kind}.safetensors", kind, extra=extra or None, average=mean_of)
         source = f"mean of {len(mean_of)} checkpoints {mean_of[0].name}..{side.name}" if mean_of else str(side)
         print(f"{kind}: {source} -> {path} ({path.stat().st_size / 1e6:.2f} MB)")

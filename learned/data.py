@@ -45,8 +45,8 @@ from physrelight import camera, colour
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import PhotoParams, make_photo, sample_photo_params
 
-__all__ = ["Batch", "PairSampler", "degrade_photo", "evenly_spread", "load_photo", "mirror_view", "pooled_mvs_normals",
-           "resize_short_side", "resize_view"]
+__all__ = ["Batch", "PairSampler", "check_under_ev", "degrade_photo", "evenly_spread", "load_photo", "mirror_view",
+           "pooled_mvs_normals", "resize_short_side", "resize_view"]
 
 T = TypeVar("T")
 
@@ -210,6 +210,12 @@ def pooled_mvs_normals(depth: torch.Tensor, K: torch.Tensor, res: int, stencil: 
     return n[0], ok[0]
 
 
+def check_under_ev(value: float, name: str = "under_ev") -> None:
+    """``ValueError`` naming ``name`` unless ``value`` is a number of stops in [0, 8] (a bool is not)."""
+    if isinstance(value, bool) or not (isinstance(value, (int, float)) and 0 <= value <= 8):
+        raise ValueError(f"{name} must be a number of stops in [0, 8], got {value!r}")
+
+
 def degrade_photo(image: torch.Tensor, rng: np.random.Generator,
                   under_ev: float = 0.0) -> tuple[torch.Tensor, PhotoParams]:
     """A clean linear photo with a camera's nuisances put back at its own resolution.
@@ -236,8 +242,7 @@ def degrade_photo(image: torch.Tensor, rng: np.random.Generator,
     """
     if image.ndim != 3 or image.shape[0] != 3:
         raise ValueError(f"degrade_photo expects image (3, H, W), got {tuple(image.shape)}")
-    if isinstance(under_ev, bool) or not (isinstance(under_ev, (int, float)) and 0 <= under_ev <= 8):
-        raise ValueError(f"under_ev must be a number of stops in [0, 8], got {under_ev!r}")
+    check_under_ev(under_ev)
     hwc = image.detach().permute(1, 2, 0).double().numpy()
     drawn = sample_photo_params(rng, hwc)
     stops = 0.0
@@ -309,6 +314,7 @@ class PairSampler:
             raise ValueError(f"{str(root)!r} has no scenes in split {split!r}")
         self.res, self.seed, self.cache, self.mirror = res, seed, cache, bool(mirror)
         self.mvs_pooled, self.stencil, self.degrade = bool(mvs_pooled), stencil, bool(degrade)
+        check_under_ev(degrade_under_ev, "degrade_under_ev")
         if degrade_under_ev and not self.degrade:
             raise ValueError("degrade_under_ev needs degrade=True (it is one of degrade_photo's nuisances)")
         self.degrade_under_ev = degrade_under_ev

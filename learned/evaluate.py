@@ -62,7 +62,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from physrelight import camera, image_model
+from physrelight import camera, colour, image_model
 from physrelight.lighting_prior import LightingPrior
 from physrelight.stats import paired_bootstrap
 from synth.dataset import SynthDataset, to_chw
@@ -82,7 +82,6 @@ __all__ = ["PER_IMAGE_METRICS", "average_precision", "compare_decompositions", "
 PER_IMAGE_METRICS = ("normal_mae_deg", "albedo_si_mse", "lighting_shading_err", "lighting_si_rel_err",
                      "level_err_stops")
 
-_LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709, as physrelight.colour.LUMINANCE
 
 
 def si_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
@@ -164,12 +163,14 @@ def level_log2_ratio(albedo: torch.Tensor, lighting: torch.Tensor, true_albedo: 
     Raises:
         ValueError: an empty mask, or a true level that is not positive.
     """
+    from .relighter import dc_luminance  # the DC level the relighter matches by
+
     if not bool(mask.any()):
         raise ValueError("level_log2_ratio: empty mask")
-    lum = torch.tensor(_LUMINANCE, dtype=torch.float64)
+    lum = torch.tensor(colour.LUMINANCE, dtype=torch.float64)
 
     def level(a: torch.Tensor, light: torch.Tensor) -> float:
-        return float((a.double()[:, mask[0]] * lum[:, None]).sum(0).mean() * (light.double()[0] * lum).sum())
+        return float((a.double()[:, mask[0]] * lum[:, None]).sum(0).mean() * dc_luminance(light.double()[None])[0])
 
     est, true = level(albedo, lighting), level(true_albedo, true_lighting)
     if not true > 0:
@@ -231,8 +232,8 @@ def evaluate(decompose: Callable[[torch.Tensor, torch.Tensor], dict[str, torch.T
         ``oracle_map_relative_lighting_shading_err``), ``oracle_albedo_si_mse``,
         ``oracle_shadow_ap``, ``oracle_lighting_si_rel_err``, ``implied_albedo_si_mse`` (and
         ``_true_lighting``, ``_true_normals_lighting``), ``level_err_stops`` and
-        ``level_log2_ratio``, the same with ``baseline_`` prefixed, ``shadow_positive_rate``, ``images``; with ``return_per_image`` the tuple
-        ``(metrics, per_image)``.
+        ``level_log2_ratio``, the same with ``baseline_`` prefixed, ``shadow_positive_rate``,
+        ``images``; with ``return_per_image`` the tuple ``(metrics, per_image)``.
     """
     ds = SynthDataset(root, split=split, mode="full")
     items = ds.items

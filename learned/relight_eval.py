@@ -50,7 +50,8 @@ from synth.photo import photo_gain
 
 from .data import evenly_spread, load_photo
 
-__all__ = ["METHODS", "evaluate_relight", "format_table", "informative_target", "relight_cases"]
+__all__ = ["METHODS", "case_batches", "evaluate_relight", "format_table", "informative_target", "relight_cases",
+           "relit_scores"]
 
 METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity")
 _REPORTED = (*METHODS, "reference")  # what a result may hold: the methods and a second pipeline's proposed
@@ -95,13 +96,39 @@ def informative_target(target_ldr: torch.Tensor, fg: torch.Tensor) -> bool:
     return bool((target_ldr[:, fg[0]] < 1.0).any())
 
 
-def _scores(pred: torch.Tensor, target: torch.Tensor, fg: torch.Tensor) -> dict[str, np.ndarray]:
+def relit_scores(pred: torch.Tensor, target: torch.Tensor, fg: torch.Tensor) -> dict[str, np.ndarray]:
     """Per-image l1, SSIM, PSNR, CIEDE2000 of LDR ``(B, 3, H, W)`` over ``fg (B, 1, H, W)``."""
     m = fg.float()
     return {"l1": metrics.l1(pred, target, m, reduction="none").numpy(),
             "ssim": metrics.ssim(pred, target, m, reduction="none").numpy(),
             "psnr": metrics.psnr(pred, target, m, reduction="none").numpy(),
             "ciede2000": metrics.delta_e2000(pred, target, m, encoding="srgb", reduction="none").numpy()}
+
+
+def case_batches(ds: SynthDataset, cases: list, res: int = 64, batch_size: int = 16, progress: bool = False):
+    """Batches of the scorable relighting cases of ``ds``, in order: yields ``(batch, scenes, saturated)``.
+
+    ``batch`` stacks :func:`load_case`'s tensors (``(B, ...)``), ``scenes`` names each case's scene, and
+    ``saturated`` counts the cases of this chunk left out because their target is clipped on the whole
+    foreground (:func:`informative_target`). Cases without foreground pixels 5 px from the border (SSIM's
+    window) are skipped uncounted. A chunk with nothing left yields an empty ``batch`` and ``scenes``, so its
+    ``saturated`` still reaches the caller."""
+    from tqdm import tqdm
+
+    r = 5  # SSIM needs mask pixels at least 5 px from the border
+    for start in tqdm(range(0, len(cases), batch_size), disable=not progress, desc="evaluate relight"):
+        loaded, scenes, saturated = [], [], 0
+        for c in cases[start:start + batch_size]:
+            case = load_case(ds, *c, res=res)
+            if not bool(case["fg"][:, r:-r, r:-r].any()):
+                continue
+            if not informative_target(case["target_ldr"], case["fg"]):
+                saturated += 1
+                continue
+            loaded.append(case)
+            scenes.append(c[0])
+        batch = {k: torch.stack([c[k] for c in loaded]) for k in loaded[0]} if loaded else {}
+        yield batch, scenes, saturated
 
 
 def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res: int = 64,
@@ -139,25 +166,12 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
         pipelines["reference"] = (reference, "proposed")
     acc: dict[str, dict[str, list[np.ndarray]]] = {m: {} for m in pipelines}
     scenes: list[str] = []
-    count = saturated = 0
-    from tqdm import tqdm
-
-    r = 5  # SSIM needs mask pixels at least 5 px from the border
-    for start in tqdm(range(0, len(cases), batch_size), disable=not progress, desc="evaluate relight"):
-        loaded = []
-        for c in cases[start:start + batch_size]:
-            case = load_case(ds, *c, res=res)
-            if not bool(case["fg"][:, r:-r, r:-r].any()):
-                continue
-            if not informative_target(case["target_ldr"], case["fg"]):
-                saturated += 1
-                continue
-            loaded.append(case)
-            scenes.append(c[0])
-        if not loaded:
+    saturated = 0
+    for batch, batch_scenes, left_out in case_batches(ds, cases, res, batch_size, progress):
+        saturated += left_out
+        if not batch_scenes:
             continue
-        batch = {k: torch.stack([c[k] for c in loaded]) for k in loaded[0]}
-        count += len(loaded)
+        scenes += batch_scenes
         for m, (fn, method) in pipelines.items():
             if method == "identity":
                 pred = colour.to_ldr(batch["image"])
@@ -165,13 +179,13 @@ def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res
                 with torch.no_grad():
                     out = fn(batch["image"], batch["sky"], batch["target_sh"], batch["source_sh"], method)
                 pred = colour.to_ldr(out["relit"].clamp_min(0))
-            for k, v in _scores(pred, batch["target_ldr"], batch["fg"]).items():
+            for k, v in relit_scores(pred, batch["target_ldr"], batch["fg"]).items():
                 acc[m].setdefault(k, []).append(v)
     per_case = {m: {k: np.concatenate(v) for k, v in acc[m].items()} for m in pipelines}
     result: dict[str, dict | float] = {m: {k: float(np.mean(v)) for k, v in per_case[m].items()} for m in pipelines}
-    result["cases"] = float(count)
+    result["cases"] = float(len(scenes))
     result["saturated_cases"] = float(saturated)
-    if "proposed" in methods and count:
+    if "proposed" in methods and scenes:
         result["paired"] = {m: {k: paired_bootstrap(per_case["proposed"][k], v, groups=scenes)._asdict()
                                 for k, v in per_case[m].items()}
                             for m in pipelines if m != "proposed"}

@@ -38,7 +38,7 @@ import torch.distributed as dist
 from physrelight import colour, image_model, io
 
 from . import checkpoint as ckpt
-from .data import PairSampler
+from .data import PairSampler, check_under_ev
 from .evaluate import evaluate
 from .lighting import load_prior
 from .networks import LIGHTING_SOLVES, InverseNet, ShadowNet, count_parameters
@@ -143,10 +143,8 @@ class TrainConfig(RunConfig):
             raise ValueError(f"mvs_pooled must be True or False, got {self.mvs_pooled!r}")
         if not isinstance(self.degrade, bool):
             raise ValueError(f"degrade must be True or False, got {self.degrade!r}")
-        u = self.degrade_under_ev
-        if isinstance(u, bool) or not (isinstance(u, (int, float)) and 0 <= u <= 8):
-            raise ValueError(f"degrade_under_ev must be a number of stops in [0, 8], got {u!r}")
-        if u and not self.degrade:
+        check_under_ev(self.degrade_under_ev, "degrade_under_ev")
+        if self.degrade_under_ev and not self.degrade:
             raise ValueError("degrade_under_ev needs degrade (--degrade-under-ev is one of --degrade's nuisances)")
 
 

@@ -26,7 +26,7 @@ import json
 import numpy as np
 import torch
 
-from learned.relight_eval import _scores, informative_target, load_case, relight_cases
+from learned.relight_eval import case_batches, relight_cases, relit_scores
 from learned.relighter import Relighter
 from physrelight import colour, image_model, io
 from physrelight.stats import paired_bootstrap
@@ -68,17 +68,10 @@ def swap_probe(data: str, a: Relighter, b: Relighter, res: int = 64, batch_size:
         raise ValueError(f"{data!r} has no relighting cases (needs >= 2 lightings)")
     acc: dict[str, dict[str, list[np.ndarray]]] = {v: {} for v in VARIANTS}
     scenes: list[str] = []
-    r = 5  # as evaluate-relight: SSIM needs mask pixels 5 px from the border
-    for start in range(0, len(cases), batch_size):
-        loaded = []
-        for c in cases[start:start + batch_size]:
-            case = load_case(ds, *c, res=res)
-            if bool(case["fg"][:, r:-r, r:-r].any()) and informative_target(case["target_ldr"], case["fg"]):
-                loaded.append(case)
-                scenes.append(c[0])
-        if not loaded:
+    for batch, batch_scenes, _ in case_batches(ds, cases, res, batch_size):  # evaluate-relight's cases
+        if not batch_scenes:
             continue
-        batch = {k: torch.stack([c[k] for c in loaded]) for k in loaded[0]}
+        scenes += batch_scenes
         image, sky = batch["image"].float(), batch["sky"].bool()
         with torch.no_grad():
             da, db = a.decompose_linear(image, sky), b.decompose_linear(image, sky)
@@ -94,7 +87,7 @@ def swap_probe(data: str, a: Relighter, b: Relighter, res: int = 64, batch_size:
                     relit[f"{name}_shading"] = shading_matched_relit(dec, image, sky, batch["target_sh"].float(),
                                                                      batch["source_sh"].float())
                 for n, x in relit.items():
-                    for k, v in _scores(colour.to_ldr(x), batch["target_ldr"], batch["fg"]).items():
+                    for k, v in relit_scores(colour.to_ldr(x), batch["target_ldr"], batch["fg"]).items():
                         acc[n].setdefault(k, []).append(v)
     per = {v: {k: np.concatenate(x) for k, x in acc[v].items()} for v in VARIANTS}
     result: dict = {v: {k: float(np.mean(x)) for k, x in per[v].items()} for v in VARIANTS}
