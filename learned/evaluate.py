@@ -83,7 +83,6 @@ PER_IMAGE_METRICS = ("normal_mae_deg", "albedo_si_mse", "lighting_shading_err", 
                      "level_err_stops")
 
 
-
 def si_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
     """Scale-invariant MSE of ``(3, H, W)`` images over ``mask (1, H, W)`` (bool)."""
     m = mask.expand_as(pred)
