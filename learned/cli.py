@@ -32,7 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from physrelight.cli import positive_int
+from physrelight.cli_common import positive_int
 
 
 def _step_range(text: str) -> tuple[int, int]:
@@ -358,7 +358,8 @@ def _add_renderer_stages(tsub: argparse._SubParsersAction) -> None:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``train`` with ``inverse``, ``shadow``, ``evaluate`` and ``export``."""
-    p = sub.add_parser("train", help="train the inverse rendering network and ShadowNet (self-supervised)",
+    p = sub.add_parser("train", help="train, evaluate and export the networks (inverse, ShadowNet, renderer, "
+                                     "SkyGAN, sky segmenter)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     tsub = p.add_subparsers(dest="stage", required=True, metavar="STAGE")
 

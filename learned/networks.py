@@ -13,11 +13,17 @@ Shapes: images ``(B, C, H, W)``; any ``H, W`` works (inputs are padded to a mult
   camera), shadow ``(B, 1, H, W)`` in [0, 1] (sigmoid, 1 = unshadowed).
 * :class:`ShadowNet`: normals ``(B, 3, H, W)`` + lighting ``(B, 9, 3)`` tiled per pixel
   (30 channels) -> shadow ``(B, 1, H, W)`` in [0, 1].
+
+:func:`load_network` (``load_inverse``, ``load_shadow``) builds either from a run folder or
+an exported weights file; inference (:class:`learned.Relighter`) and training both use it.
 """
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
+from typing import Any
 
 import torch
 import torch.nn.functional as F
@@ -25,9 +31,10 @@ from torch import nn
 
 from physrelight import colour
 
-__all__ = ["EXPOSURE_KEY", "UNet", "InverseNet", "ShadowNet", "count_parameters", "log_average_luminance", "metered",
-           "mirror_averaged", "normalise_lighting",
-           "tile_lighting"]
+from . import checkpoint as ckpt
+
+__all__ = ["EXPOSURE_KEY", "UNet", "InverseNet", "ShadowNet", "count_parameters", "load_inverse", "load_network",
+           "load_shadow", "log_average_luminance", "metered", "mirror_averaged", "normalise_lighting", "tile_lighting"]
 
 
 def _groups(channels: int) -> int:
@@ -246,3 +253,58 @@ class ShadowNet(nn.Module):
 def count_parameters(model: nn.Module) -> int:
     """Number of trainable parameters."""
     return sum(p.numel() for p in model.parameters() if p.requires_grad)
+
+
+# ------------------------------------------------------------------------- loading
+
+
+_NETWORKS = ("inverse", "shadow")
+
+
+def load_network(path: str | Path, kind: str) -> torch.nn.Module:
+    """An ``"inverse"`` or ``"shadow"`` network from a run folder (latest checkpoint) or an
+    exported weights file (its metadata must say ``kind``), in eval mode."""
+    if kind not in _NETWORKS:
+        raise ValueError(f"kind must be one of {list(_NETWORKS)}, got {kind!r}")
+    p = Path(path)
+    if p.is_dir():
+        side = ckpt.latest_checkpoint(p)
+        if side is None:
+            raise FileNotFoundError(f"no checkpoint in {str(p)!r}")
+        net = _build(kind, json.loads(side.read_text())["config"])
+        ckpt.load_checkpoint(side, net, restore_rng=False)
+    else:
+        if not p.is_file():
+            raise FileNotFoundError(f"no {kind} run folder or weights file at {str(p)!r}")
+        tensors, meta = ckpt.load_weights(p)
+        if meta.get("kind") != kind:
+            raise ValueError(f"{str(p)!r} holds {meta.get('kind')!r} weights, not {kind!r} ones")
+        cfg = {"width": int(meta["width"]), "depth": int(meta["depth"]), **json.loads(meta.get("config", "{}"))}
+        if "lighting_solve" in meta:  # chosen at export (train export --lighting-solve)
+            cfg["lighting_solve"] = meta["lighting_solve"]
+        if "mirror_average" in meta:  # chosen at export (train export --mirror-average)
+            cfg["mirror_average"] = meta["mirror_average"] == "1"
+        if "meter_exposure" in meta:  # chosen at export (train export --meter-exposure)
+            cfg["meter_exposure"] = meta["meter_exposure"] == "1"
+        net = _build(kind, cfg)
+        net.load_state_dict(tensors)
+    return net.eval()
+
+
+def _build(kind: str, cfg: dict[str, Any]) -> torch.nn.Module:
+    """An untrained network of a run's configuration (runs before ``lighting_solve`` existed: project)."""
+    if kind == "inverse":
+        return InverseNet(int(cfg["width"]), int(cfg["depth"]), cfg.get("lighting_solve", "project"),
+                          mirror_average=bool(cfg.get("mirror_average", False)),
+                          meter_exposure=bool(cfg.get("meter_exposure", False)))
+    return ShadowNet(int(cfg["width"]), int(cfg["depth"]))
+
+
+def load_inverse(path: str | Path) -> InverseNet:
+    """The inverse network of a run folder or an exported weights file (:func:`load_network`)."""
+    return load_network(path, "inverse")
+
+
+def load_shadow(path: str | Path) -> ShadowNet:
+    """ShadowNet of a run folder or an exported weights file (:func:`load_network`)."""
+    return load_network(path, "shadow")

@@ -132,7 +132,7 @@ def _relight(args: argparse.Namespace) -> int:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``relight``."""
-    from physrelight.cli import positive_int
+    from physrelight.cli_common import positive_int, positive_number
 
     from .relighter import RELIGHT_METHODS, SKY_TYPES
 
@@ -153,7 +153,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--layers", default=None, help="also write albedo, normals, shadows, shading, sky mask here")
     p.add_argument("--sequence", type=positive_int, default=None, metavar="N",
                    help="sweep the azimuth over 360 degrees in N frames; write an animated GIF")
-    p.add_argument("--fps", type=float, default=12.0, help="GIF frame rate (default: 12)")
+    p.add_argument("--fps", type=positive_number, default=12.0, help="GIF frame rate (default: 12)")
     p.add_argument("--method", choices=RELIGHT_METHODS, default="proposed",
                    help="relighting method (default: proposed, the full pipeline)")
     p.add_argument("--weights", default=None, help="weights folder (default: the shipped ones)")

@@ -151,7 +151,7 @@ class Relighter:
         d = Path(path) if path is not None else WEIGHTS_DIR
         if not d.is_dir():
             raise FileNotFoundError(f"no weights folder at {str(d)!r}")
-        from .train import load_network
+        from .networks import load_network
 
         inverse = load_network(d / "inverse.safetensors", "inverse")
         shadow = load_network(d / "shadow.safetensors", "shadow")
@@ -321,6 +321,31 @@ class Relighter:
         relit = torch.where(sky, image, transfer_to_full_resolution(image, small, out["relit"]))
         return {"relit": relit, "working": out, "working_sky": small_sky}
 
+    def paint_sky(self, relit: torch.Tensor, sky: torch.Tensor, working: dict[str, torch.Tensor],
+                  working_sky: torch.Tensor, seed: int = 0) -> torch.Tensor:
+        """SkyGAN's sky for the target, composited into a full-resolution relighting.
+
+        Args:
+            relit: ``(B, 3, H, W)`` linear relit photo (:meth:`relight_full_resolution`'s ``"relit"``).
+            sky: ``(B, 1, H, W)`` bool, where the sky goes.
+            working, working_sky: that call's ``"working"`` dict (relit foreground and target at
+                the working resolution) and ``"working_sky"``.
+            seed: SkyGAN's noise (same seed, same sky).
+
+        Returns:
+            ``(B, 3, H, W)``: ``relit`` with the generated sky on ``sky``; ``relit`` itself when no
+            generator is shipped or there is no sky.
+        """
+        if self.sky_generator is None or not bool(sky.any()):
+            return relit
+        # SkyGAN at the working resolution (its training scale), conditioned on the relit
+        # foreground and the target; the sky is smooth, so upsampling it loses nothing.
+        from .sky_gan import generate_sky
+
+        painted = generate_sky(self.sky_generator, working["relit"], working_sky, working["target"], seed=seed)
+        painted = torch.nn.functional.interpolate(painted, size=relit.shape[-2:], mode="bilinear", align_corners=False)
+        return torch.where(sky, painted, relit)
+
     def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
                 method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
                 seed: int = 0) -> Any:
@@ -415,13 +440,8 @@ class Relighter:
         def up(x: torch.Tensor) -> torch.Tensor:
             return torch.nn.functional.interpolate(x, size=size, mode="bilinear", align_corners=False)
 
-        if new_sky and self.sky_generator is not None and bool(sky.any()):
-            # SkyGAN at the working resolution (its training scale), conditioned on the relit
-            # foreground and the target; the sky is smooth, so upsampling it loses nothing.
-            from .sky_gan import generate_sky
-
-            painted = generate_sky(self.sky_generator, out["relit"], small_sky, out["target"], seed=seed)
-            relit = torch.where(sky, up(painted), relit)
+        if new_sky:
+            relit = self.paint_sky(relit, sky, out, small_sky, seed=seed)
 
         with torch.no_grad():
             result = {"relit": colour.to_ldr(relit.clamp_min(0))}

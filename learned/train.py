@@ -23,11 +23,10 @@ the validation (``mode="full"``) on the validation split (or ``--val-data``).
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -35,53 +34,21 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
-from physrelight import colour, image_model, io
+from physrelight import image_model, io
 
 from . import checkpoint as ckpt
 from .data import PairSampler, check_under_ev
 from .evaluate import evaluate
 from .lighting import load_prior
-from .networks import LIGHTING_SOLVES, InverseNet, ShadowNet, count_parameters
+from .networks import LIGHTING_SOLVES, InverseNet, ShadowNet, count_parameters, load_inverse, load_network
 from .objectives import LossWeights, decompose_and_solve, inverse_losses
+from .runs import RunConfig, RunLogs, display
 
-__all__ = ["MVS_STENCILS", "RESUME_FREE_FIELDS", "RunConfig", "TrainConfig", "build_inverse", "load_inverse", "load_network", "load_shadow", "train"]
+__all__ = ["MVS_STENCILS", "TrainConfig", "train", "write_panel"]
 
 MVS_STENCILS = ("central", "one_sided")  # how the normal term reads the MVS-like depth
 
 STAGES = ("inverse", "shadow")
-
-
-# Fields a resumed run may change: where it writes, how long it runs, how it reports.
-RESUME_FREE_FIELDS = frozenset({"out", "progress", "steps", "val_every", "val_images", "threads", "val_data",
-                                "val_split"})
-
-
-class RunConfig:
-    """What every training-run configuration dataclass shares (a mixin): the input checks
-    and the identity a resume must keep (:func:`learned.checkpoint.resume`)."""
-
-    def check_common(self, positive_ints: tuple[str, ...], positive_numbers: tuple[str, ...],
-                     known_weights: set[str] | dict[str, float]) -> None:
-        """Raise a ``ValueError`` naming the field unless every ``positive_ints`` field is a
-        positive int, every ``positive_numbers`` field a finite positive number, ``data`` a
-        dataset folder and every loss weight one of ``known_weights``."""
-        for name in positive_ints:
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        for name in positive_numbers:
-            v = getattr(self, name)
-            if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a positive number, got {v!r}")
-        if not Path(self.data, "manifest.json").is_file():
-            raise ValueError(f"{self.data!r} is not a dataset folder (no manifest.json)")
-        unknown = set(self.weights) - set(known_weights)
-        if unknown:
-            raise ValueError(f"unknown loss weights {sorted(unknown)}; known: {sorted(known_weights)}")
-
-    def identity(self) -> dict[str, Any]:
-        """The fields that must agree for a resume (all but :data:`RESUME_FREE_FIELDS`)."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in RESUME_FREE_FIELDS}
 
 
 @dataclass
@@ -148,65 +115,6 @@ class TrainConfig(RunConfig):
             raise ValueError("degrade_under_ev needs degrade (--degrade-under-ev is one of --degrade's nuisances)")
 
 
-def build_inverse(width: int, depth: int, seed: int) -> InverseNet:
-    torch.manual_seed(seed)
-    return InverseNet(width, depth)
-
-
-_NETWORKS = ("inverse", "shadow")
-
-
-def load_network(path: str | Path, kind: str) -> torch.nn.Module:
-    """An ``"inverse"`` or ``"shadow"`` network from a run folder (latest checkpoint) or an
-    exported weights file (its metadata must say ``kind``), in eval mode."""
-    if kind not in _NETWORKS:
-        raise ValueError(f"kind must be one of {list(_NETWORKS)}, got {kind!r}")
-    import json
-
-    p = Path(path)
-    if p.is_dir():
-        side = ckpt.latest_checkpoint(p)
-        if side is None:
-            raise FileNotFoundError(f"no checkpoint in {str(p)!r}")
-        net = _build(kind, json.loads(side.read_text())["config"])
-        ckpt.load_checkpoint(side, net, restore_rng=False)
-    else:
-        if not p.is_file():
-            raise FileNotFoundError(f"no {kind} run folder or weights file at {str(p)!r}")
-        tensors, meta = ckpt.load_weights(p)
-        if meta.get("kind") != kind:
-            raise ValueError(f"{str(p)!r} holds {meta.get('kind')!r} weights, not {kind!r} ones")
-        cfg = {"width": int(meta["width"]), "depth": int(meta["depth"]), **json.loads(meta.get("config", "{}"))}
-        if "lighting_solve" in meta:  # chosen at export (train export --lighting-solve)
-            cfg["lighting_solve"] = meta["lighting_solve"]
-        if "mirror_average" in meta:  # chosen at export (train export --mirror-average)
-            cfg["mirror_average"] = meta["mirror_average"] == "1"
-        if "meter_exposure" in meta:  # chosen at export (train export --meter-exposure)
-            cfg["meter_exposure"] = meta["meter_exposure"] == "1"
-        net = _build(kind, cfg)
-        net.load_state_dict(tensors)
-    return net.eval()
-
-
-def _build(kind: str, cfg: dict[str, Any]) -> torch.nn.Module:
-    """An untrained network of a run's configuration (runs before ``lighting_solve`` existed: project)."""
-    if kind == "inverse":
-        return InverseNet(int(cfg["width"]), int(cfg["depth"]), cfg.get("lighting_solve", "project"),
-                          mirror_average=bool(cfg.get("mirror_average", False)),
-                          meter_exposure=bool(cfg.get("meter_exposure", False)))
-    return ShadowNet(int(cfg["width"]), int(cfg["depth"]))
-
-
-def load_inverse(path: str | Path) -> InverseNet:
-    """The inverse network of a run folder or an exported weights file (:func:`load_network`)."""
-    return load_network(path, "inverse")
-
-
-def load_shadow(path: str | Path) -> ShadowNet:
-    """ShadowNet of a run folder or an exported weights file (:func:`load_network`)."""
-    return load_network(path, "shadow")
-
-
 # ------------------------------------------------------------------------- distributed
 
 
@@ -243,80 +151,6 @@ def _rank_divergence(model: torch.nn.Module, world: int) -> float:
     return float(diff)
 
 
-# ------------------------------------------------------------------------- logs
-
-
-def _settle_header(path: Path, wanted: list[str]) -> list[str]:
-    """The columns ``path`` is written under from now on: its own, plus any of ``wanted`` it lacks
-    (e.g. a run resumed under newer code whose metrics gained a column). When columns are added,
-    the file is rewritten under them, so that no row lands under the wrong heading."""
-    if not path.is_file():
-        return wanted
-    with path.open(newline="") as f:
-        reader = csv.DictReader(f)
-        rows, old = list(reader), list(reader.fieldnames or [])
-    header = old + [k for k in wanted if k not in old]
-    if header != old:
-        with io.atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=header, restval="")
-            w.writeheader()
-            w.writerows(rows)
-    return header
-
-
-class _Logs:
-    """CSV and TensorBoard writers of rank 0; on resume the CSV keeps rows up to ``step``."""
-
-    def __init__(self, run: Path, start: int, enabled: bool) -> None:
-        self.run, self.enabled = run, enabled
-        self._headers: dict[str, list[str]] = {}  # each CSV's columns, read from disk once
-        self.tb = None
-        if not enabled:
-            return
-        for name in ("train.csv", "val.csv"):
-            path = run / name
-            if path.is_file():  # drop rows written after the checkpoint we resume from
-                rows = list(csv.reader(path.open()))
-                kept = [rows[0]] + [r for r in rows[1:] if int(r[0]) <= start]
-                with path.open("w", newline="") as f:
-                    csv.writer(f).writerows(kept)
-        try:
-            from torch.utils.tensorboard import SummaryWriter
-
-            self.tb = SummaryWriter(str(run / "tb"), purge_step=start + 1)
-        except ImportError:  # tensorboard is optional: CSV always
-            self.tb = None
-
-    def write(self, name: str, step: int, values: dict[str, float]) -> None:
-        if not self.enabled:
-            return
-        path = self.run / name
-        header = self._headers.get(name)
-        if header is None or any(k not in header for k in values):  # first write here, or a new metric
-            header = self._headers[name] = _settle_header(path, ["step", *values])
-        new = not path.is_file()
-        row = {"step": step, **{k: f"{v:.8g}" for k, v in values.items()}}
-        with path.open("a", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=header, restval="")
-            if new:
-                w.writeheader()
-            w.writerow(row)
-        if self.tb is not None:
-            group = name.split(".")[0]
-            for k, v in values.items():
-                self.tb.add_scalar(f"{group}/{k}", v, step)
-            self.tb.flush()
-
-    def close(self) -> None:
-        if self.tb is not None:
-            self.tb.close()
-
-
-def _ldr(x: torch.Tensor) -> np.ndarray:
-    """``(3, H, W)`` linear -> ``(H, W, 3)`` display values."""
-    return colour.to_ldr(x.detach().clamp_min(0)).permute(1, 2, 0).numpy()
-
-
 def write_panel(path: Path, image: torch.Tensor, out: dict[str, torch.Tensor], rows: int = 4) -> None:
     """PNG grid, one row per photo: photo | albedo | normals | shadow | shading | re-render."""
     tiles = []
@@ -324,9 +158,9 @@ def write_panel(path: Path, image: torch.Tensor, out: dict[str, torch.Tensor], r
         n = out["normals"][j]
         shading = image_model.shading(n[None], out["lighting"][j][None])[0]
         rerender = out["albedo"][j] * shading * out["shadow"][j]
-        row = [_ldr(image[j]), out["albedo"][j].permute(1, 2, 0).numpy() ** (1 / 2.2),
+        row = [display(image[j]), out["albedo"][j].permute(1, 2, 0).numpy() ** (1 / 2.2),
                (n.permute(1, 2, 0).numpy() * 0.5 + 0.5), np.repeat(out["shadow"][j].permute(1, 2, 0).numpy(), 3, -1),
-               _ldr(shading), _ldr(rerender)]
+               display(shading), display(rerender)]
         if "shadow_net" in out:
             row.append(np.repeat(out["shadow_net"][j].permute(1, 2, 0).numpy(), 3, -1))
         tiles.append(np.concatenate(row, 1))
@@ -399,7 +233,7 @@ def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
         return {"step": start, "train_seconds": seconds}
 
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
-    logs = _Logs(run, start, rank == 0)
+    logs = RunLogs(run, start, rank == 0)
     if rank == 0 and start == 0:
         io.write_json(run / "config.json", {**asdict(config), "world_size": world,
                                             "parameters": count_parameters(model)})

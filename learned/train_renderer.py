@@ -42,13 +42,13 @@ from . import checkpoint as ckpt
 from .data import Batch, PairSampler
 from .discriminators import MultiscaleDiscriminator
 from .lighting import WEIGHTS_DIR, load_prior
-from .networks import count_parameters
+from .networks import count_parameters, load_inverse, load_shadow
 from .neural_renderer import NeuralRenderer
 from .objectives import decompose_and_solve
 from .relight_eval import evaluate_relight, load_case, relight_cases
 from .relighter import Relighter
 from .renderer_objectives import RendererWeights, discriminator_loss, renderer_losses
-from .train import RunConfig, _Logs, _ldr, load_inverse, load_shadow
+from .runs import RunConfig, RunLogs, display
 
 __all__ = ["DecompositionCache", "RendererConfig", "export_renderer", "train_renderer"]
 
@@ -153,7 +153,7 @@ def train_renderer(config: RendererConfig) -> dict[str, Any]:
         print(f"{run}: already at step {start} >= {config.steps}")
         return {"step": start, "train_seconds": seconds}
 
-    logs = _Logs(run, start, True)
+    logs = RunLogs(run, start, True)
     if start == 0:
         io.write_json(run / "config.json", {**asdict(config), "parameters_g": count_parameters(g),
                                             "parameters_d": count_parameters(d)})
@@ -230,10 +230,10 @@ def write_relight_panel(path: Path, pipe: Relighter, root: str, split: str, res:
     for c in picks:
         case = load_case(ds, *c, res=res)
         image, sky = case["image"][None], case["sky"][None]
-        row = [_ldr(image[0])]
+        row = [display(image[0])]
         for m in ("lambertian_sh", "shadownet_lambertian", "proposed"):
             out = pipe.relight_linear(image, sky, case["target_sh"][None], case["source_sh"][None], m)
-            row.append(_ldr(out["relit"][0]))
+            row.append(display(out["relit"][0]))
         row.append(case["target_ldr"].permute(1, 2, 0).numpy())
         tiles.append(np.concatenate(row, 1))
     io.write_png(path, np.clip(np.concatenate(tiles, 0), 0, 1))

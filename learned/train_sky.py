@@ -45,7 +45,7 @@ from .discriminators import MultiscaleDiscriminator, feature_matching_loss, lsga
 from .networks import count_parameters
 from .sky_gan import LOG_EPS, SkyGenerator, condition_map, generate_sky, lighting_scale
 from .sky_segmentation import SkySegmenter, photometric_augment, segment_sky
-from .train import RunConfig, _Logs, _ldr
+from .runs import RunConfig, RunLogs, display
 
 __all__ = ["SkyTrainConfig", "SkyData", "evaluate_segmentation", "export_sky", "mirror_lighting",
            "sky_follows_lighting", "train_sky", "SKY_STAGES"]
@@ -256,7 +256,7 @@ def train_sky(config: SkyTrainConfig) -> dict[str, Any]:
     data = SkyData(config.data, config.train_split, config.res, lighting, progress=config.progress)
     val = SkyData(config.val_data or config.data, config.val_split, config.res, lighting,
                   max_images=config.val_images)
-    logs = _Logs(run, start, True)
+    logs = RunLogs(run, start, True)
     if start == 0:
         io.write_json(run / "config.json", {**asdict(config), "parameters": {k: count_parameters(m) for k, m in
                                                                              model.items()}, "photos": len(data)})
@@ -356,14 +356,14 @@ def _seg_panel(path: Path, image: torch.Tensor, pred: torch.Tensor, gt: torch.Te
     """Rows: photo | predicted mask | ground-truth mask."""
     rows = []
     for j in range(image.shape[0]):
-        rows.append(np.concatenate([_ldr(image[j]), np.repeat(pred[j].permute(1, 2, 0).float().numpy(), 3, -1),
+        rows.append(np.concatenate([display(image[j]), np.repeat(pred[j].permute(1, 2, 0).float().numpy(), 3, -1),
                                     np.repeat(gt[j].permute(1, 2, 0).float().numpy(), 3, -1)], 1))
     io.write_png(path, np.concatenate(rows, 0))
 
 
 def _gan_panel(path: Path, columns: list[torch.Tensor]) -> None:
     """Rows: photo | SkyGAN seed 0 | seed 1 | shuffled SH (all exposed as the photo)."""
-    rows = [np.concatenate([_ldr(c[j]) for c in columns], 1) for j in range(columns[0].shape[0])]
+    rows = [np.concatenate([display(c[j]) for c in columns], 1) for j in range(columns[0].shape[0])]
     io.write_png(path, np.concatenate(rows, 0))
 
 
@@ -525,7 +525,7 @@ def sky_follows_lighting(generator: SkyGenerator, root: str | Path, split: str =
                 generate_sky(generator, image[pick], sky[pick], la[pick], seed=seed + 1),
                 generate_sky(generator, image[pick], sky[pick], other[pick], seed=seed),
                 torch.stack(ref_b)[pick], generate_sky(generator, fgb[pick], sky[pick], lb_[pick], seed=seed)]
-        rows = [np.concatenate([_ldr(c[j]) for c in cols], 1) for j in range(len(pick))]
+        rows = [np.concatenate([display(c[j]) for c in cols], 1) for j in range(len(pick))]
         grid = np.concatenate(rows, 0)
         io.write_png(panel, np.clip(grid.repeat(2, 0).repeat(2, 1), 0, 1))
     return results

@@ -1,46 +1,93 @@
-"""The ``physrelight`` command line: one entry point, one subcommand per job.
+"""The ``physrelight`` command: one entry point, one subcommand per job.
 
-Every subcommand has ``--help``, shows progress on long work, and exits non-zero with a
-one-line reason on bad input (``ValueError``/``FileNotFoundError`` become
-``physrelight: error: ...``), never a traceback.
+This is the one module of :mod:`physrelight` that reaches up into ``synth``, ``learned`` and
+``validation``. Each subcommand's parser lives with its stage (``synth/cli.py``,
+``learned/cli.py``, ``learned/relight_cli.py``, ``validation/cli.py``,
+``validation/bench/cli.py``; ``demo`` here) and is imported only when that subcommand is on
+the command line: ``physrelight --help`` lists them from :data:`SUBCOMMANDS` without
+importing any stage, or torch, and answers at once.
+
+Before a handler runs, the optional extras it needs are checked
+(:func:`physrelight.cli_common.require_extras`): a missing one is a one-line error naming
+the ``pip install`` that adds it, before any work and with nothing written. Every
+subcommand has ``--help``, shows progress on long work, and exits non-zero with a one-line
+reason on bad input (``ValueError``/``FileNotFoundError`` become ``physrelight: error:
+...``), never a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
-from typing import Callable, Sequence
+from dataclasses import dataclass
+from typing import Sequence
 
-Handler = Callable[[argparse.Namespace], int]
+from physrelight.cli_common import MissingExtra, positive_int, require_extras
+
+__all__ = ["SUBCOMMANDS", "Subcommand", "build_parser", "main", "positive_int"]
+# positive_int is re-exported for validation/bench/cli.py, which still imports it from here;
+# new code imports it from physrelight.cli_common.
 
 
-_DEMO_PART_2 = """
-Part 2 (validation/relight_demo.py, needs the full install): a synthetic scene path traced
-with Mitsuba under a clear sky is relit to three other lightings with the shipped weights and
-compared with the path-traced targets (proposed, lambertian_sh, identity: l1, PSNR, SSIM);
-scikit-image's rocket.jpg is relit too. Outputs: relight_demo.png, relight_metrics.json/.md.
+@dataclass(frozen=True)
+class Subcommand:
+    """Where a subcommand's parser lives and what its handler needs."""
+
+    module: str  # has add_parser(subparsers), registering this subcommand with ``help``
+    help: str  # listed by ``physrelight --help`` (the stage's own parser says the same: tested)
+    extras: tuple[str, ...] = ()  # optional extras the handler needs (checked before it runs)
+
+
+SUBCOMMANDS: dict[str, Subcommand] = {
+    "demo": Subcommand(__name__, "the main job: SH relighting vs exact, then the learned pipeline vs path tracing"),
+    "relight": Subcommand("learned.relight_cli", "relight one outdoor photo to a new lighting (shipped weights)"),
+    "synth": Subcommand("synth.cli", "render a synthetic multi-view x multi-illumination dataset with Mitsuba",
+                        ("synth",)),
+    "train": Subcommand("learned.cli", "train, evaluate and export the networks (inverse, ShadowNet, renderer, "
+                                       "SkyGAN, sky segmenter)"),
+    "validate": Subcommand("validation.cli", "check the physics against path tracing and write a report",
+                           ("validation",)),
+    "bench": Subcommand("validation.bench.cli", "relighting benchmark: methods x protocols x strata, speed vs accuracy",
+                        ("validation",)),
+}
+
+
+# ----------------------------------------------------------------------------- demo
+
+_DEMO_DESCRIPTION = """\
+Part 1 (physrelight/demo.py, the physics core alone): a textured Lambertian sphere is rendered
+exactly under one shipped HDRI, its lighting solved from the photo at SH orders 2 and 4, its
+albedo recovered and relit to other HDRIs, and compared with the exact render: the ceiling of any
+SH relighting. Outputs: demo.png, metrics.json.
+
+Part 2 (validation/relight_demo.py, needs the synth extra): a synthetic scene path traced with
+Mitsuba under a clear sky is relit to three other lightings with the shipped weights and compared
+with the path-traced targets (proposed, lambertian_sh, identity: l1, PSNR, SSIM); scikit-image's
+rocket.jpg is relit too when scikit-image is installed. Outputs: relight_demo.png,
+relight_metrics.json/.md.
 """
 
 
 def _demo(args: argparse.Namespace) -> int:
+    if not args.physics_only:  # part 2 renders with Mitsuba: say so before part 1 spends a minute
+        require_extras("demo", ("synth",), "or run part 1 alone with --physics-only")
     from physrelight import demo
 
     print("== part 1: the physics core (SH relighting of a sphere vs exact irradiance)")
     demo.run(args.output, source=args.source, targets=tuple(args.targets), size=args.size)
     if args.physics_only:
         return 0
-    try:  # the pipeline part needs the synth (Mitsuba) and learned extras
-        from validation import relight_demo
-    except ImportError as err:
-        raise ValueError(f"the pipeline demo needs the full install ({err}); use --physics-only") from None
+    from validation import relight_demo
+
     print("== part 2: the learned pipeline on a path-traced scene and a real photo")
     relight_demo.run(args.output, size=args.scene_size, seed=args.seed)
     return 0
 
 
-def _add_demo(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="the main job: SH relighting vs exact, then the learned pipeline vs path tracing",
-                       description=__import__("physrelight.demo", fromlist=["x"]).__doc__ + _DEMO_PART_2,
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register ``demo``."""
+    p = sub.add_parser("demo", help=SUBCOMMANDS["demo"].help, description=_DEMO_DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("-o", "--output", default="out/demo", help="output folder (default: out/demo)")
     p.add_argument("--source", default="city", help="shipped HDRI lighting the photo (default: city)")
@@ -52,94 +99,35 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=_demo)
 
 
-def positive_int(text: str) -> int:
-    """argparse type: a positive integer, with a one-line error otherwise (shared by subcommands)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
-    return v
+# ----------------------------------------------------------------------------- dispatch
 
 
-def _synth(args: argparse.Namespace) -> int:
-    from synth import writer  # imports Mitsuba: only for this subcommand
-
-    config = writer.SynthConfig(
-        scenes=args.scenes, views=args.views, lights=args.lights, res=args.res, spp=args.spp, seed=args.seed,
-        max_depth=args.max_depth, gbuffer_spp=args.gbuffer_spp, shadow_spp=args.shadow_spp,
-        env_resolution=args.env_res, kinds=tuple(args.kinds), hdri_dir=args.hdri_dir,
-        glossy_fraction=args.glossy_fraction, trees=not args.no_trees, mvs_scale=args.mvs_scale)
-    shard = writer.parse_shard(args.shard)
-    summary = writer.write_dataset(args.output, config, shard, progress=not args.quiet)
-    print(f"rendered {len(summary['rendered'])} scene(s), skipped {len(summary['skipped'])} finished, "
-          f"in {summary['seconds']:.1f} s -> {args.output}")
-    return 0
+def _chosen(argv: Sequence[str]) -> str | None:
+    """The subcommand named on the command line (the first word that is not an option), if any."""
+    return next((a for a in argv if not a.startswith("-")), None)
 
 
-def _add_synth(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("synth", help="render a synthetic multi-view x multi-illumination dataset with Mitsuba",
-                       description="Render procedural outdoor landmarks under several lightings from several "
-                                   "tourist-like views, with ground truth (see synth/writer.py for the layout). "
-                                   "Resumable: re-run the same command to finish an interrupted dataset.")
-    p.add_argument("output", help="dataset folder")
-    p.add_argument("--scenes", type=positive_int, default=4)
-    p.add_argument("--views", type=positive_int, default=4)
-    p.add_argument("--lights", type=positive_int, default=3)
-    p.add_argument("--res", type=positive_int, default=128, help="image size in pixels (square)")
-    p.add_argument("--spp", type=positive_int, default=64, help="path-tracing samples per pixel")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--shard", default="0/1", help="render scenes i, i+n, ... of the dataset (i/n)")
-    p.add_argument("--hdri-dir", default=None, help="folder of .exr maps for the hdri lighting kind "
-                                                    "(default: the maps shipped in the package)")
-    p.add_argument("--max-depth", type=positive_int, default=8, help="path length (bounces + 1)")
-    p.add_argument("--gbuffer-spp", type=positive_int, default=16)
-    p.add_argument("--shadow-spp", type=positive_int, default=32,
-                   help="shadow samples per pixel (x4 for lightings without a sun)")
-    p.add_argument("--env-res", type=positive_int, default=128, help="sky map height for sun/sky lightings")
-    p.add_argument("--kinds", nargs="+", default=["sunsky", "evening", "overcast", "hdri"],
-                   help="lighting kinds to draw from")
-    p.add_argument("--glossy-fraction", type=float, default=0.0, help="share of non-Lambertian materials")
-    p.add_argument("--no-trees", action="store_true")
-    p.add_argument("--mvs-scale", type=positive_int, default=1,
-                   help="degrade the MVS depth from geometry at this many times the photo's resolution "
-                        "(every other file is unchanged; at most 4)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(handler=_synth)
-
-
-_SUBCOMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_demo, _add_synth]
-
-# Subcommands owned by other packages: each module has ``add_parser(subparsers)`` and
-# keeps its heavy imports (Mitsuba, training code) inside the handler.
-_PACKAGE_SUBCOMMANDS = ("validation.cli", "learned.cli", "learned.relight_cli", "validation.bench.cli")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    import importlib
-
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser with ``command``'s full subparser (its stage module imported) and the others listed only."""
     parser = argparse.ArgumentParser(prog="physrelight", description="Single-image outdoor relighting, physics-checked.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add in _SUBCOMMANDS:
-        add(sub)
-    for name in _PACKAGE_SUBCOMMANDS:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as err:
-            if err.name != name and not name.startswith(f"{err.name}."):
-                raise  # a real missing dependency, not a package that is not there yet
-            continue
-        module.add_parser(sub)
+    for name, spec in SUBCOMMANDS.items():
+        if name == command:
+            importlib.import_module(spec.module).add_parser(sub)
+        else:  # listed in --help; parsed only when named, with its own module loaded
+            sub.add_parser(name, help=spec.help, add_help=False)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = _chosen(argv)
+    parser = build_parser(command if command in SUBCOMMANDS else None)
     args = parser.parse_args(argv)
     try:
+        require_extras(args.command, SUBCOMMANDS[args.command].extras)
         return args.handler(args)
-    except (ValueError, FileNotFoundError) as err:
+    except (ValueError, FileNotFoundError, MissingExtra) as err:
         print(f"physrelight: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

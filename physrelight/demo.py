@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 import torch
@@ -139,7 +139,8 @@ def run(out_dir: str | Path, source: str = "city", targets: tuple[str, ...] = ("
     return results
 
 
-def _panel(path: Path, source: str, rows: list) -> None:
+def panel_figure(source: str, rows: list) -> Any:
+    """The panel as a matplotlib figure: one row per target, photo | order 2 | order 4 | exact | error map."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -151,7 +152,11 @@ def _panel(path: Path, source: str, rows: list) -> None:
         for c, img in enumerate(imgs):
             axes[r, c].imshow(img[0].permute(1, 2, 0).numpy())
         vmax = float(err.max()) or 1.0
-        axes[r, 4].imshow(err[0].numpy(), cmap="magma", vmin=0, vmax=vmax)
+        shown = axes[r, 4].imshow(err[0].numpy(), cmap="magma", vmin=0, vmax=vmax)
+        # each row has its own scale, so each gets its own bar (linear radiance, mean over RGB)
+        bar = fig.colorbar(shown, ax=axes[r, 4], fraction=0.046, pad=0.04)
+        bar.ax.tick_params(labelsize=6)
+        bar.set_label("linear radiance", fontsize=6)
         axes[r, 0].set_ylabel(name, fontsize=8)
         for c in range(len(cols)):
             axes[r, c].set_xticks([])
@@ -160,6 +165,13 @@ def _panel(path: Path, source: str, rows: list) -> None:
                 axes[r, c].set_title(cols[c], fontsize=8)
     fig.suptitle("Relighting a Lambertian sphere through SH vs exact irradiance", fontsize=9)
     fig.tight_layout()
+    return fig
+
+
+def _panel(path: Path, source: str, rows: list) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = panel_figure(source, rows)
     with io.atomic_path(path, ".png") as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)

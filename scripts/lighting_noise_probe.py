@@ -21,7 +21,7 @@ import torch
 from learned.evaluate import evaluate
 from learned.lighting import load_prior
 from learned.objectives import decompose_and_solve
-from learned.train import load_inverse
+from learned.networks import load_inverse
 from physrelight import image_model
 
 

@@ -34,7 +34,7 @@ from learned.evaluate import evaluate
 from learned.lighting import WEIGHTS_DIR, load_prior
 from learned.networks import InverseNet, mirror_averaged
 from learned.objectives import decompose_and_solve
-from learned.train import load_inverse
+from learned.networks import load_inverse
 from synth.dataset import SynthDataset, to_chw
 
 NORMAL_KEYS = ("normal_mae_deg", "normal_median_deg", "normal_mae_deg_mvs", "normal_mae_deg_no_mvs",

@@ -165,7 +165,12 @@ def write_dataset(out: str | Path, config: SynthConfig, shard: tuple[int, int] =
     from tqdm import tqdm
 
     root = Path(out)
-    root.mkdir(parents=True, exist_ok=True)
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"output {str(root)!r} exists and is not a folder; give a dataset folder")
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as err:  # e.g. a file where a parent folder should be
+        raise ValueError(f"cannot make dataset folder {str(root)!r}: {err.strerror}") from None
     _check_manifest(root, config)
     todo = shard_scenes(config, shard)
     done = [i for i in todo if (root / scene_name(i) / "scene.json").is_file()]

@@ -175,6 +175,11 @@ def _finite(x: float) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def md_cell(text: str) -> str:
+    """``text`` safe inside a markdown table cell: a bare ``|`` (as in ``|z| > 4``) would end the cell."""
+    return str(text).replace("|", "\\|")
+
+
 def jsonable(obj: Any) -> Any:
     """Numbers, arrays and nested containers -> plain JSON types (NaN/inf -> None)."""
     if isinstance(obj, dict):
@@ -306,7 +311,7 @@ class Context:
         command: the command line that produced the run (stated on every chart).
         machine: :func:`machine` of this run.
         progress: ``progress(message)`` prints a line (or nothing).
-        shared: objects checks share (the scene bank), made on first use.
+        shared: objects checks share (the scene bank: :func:`validation.scenes.bank`), made on first use.
     """
 
     level: Level
@@ -323,11 +328,3 @@ class Context:
         d = Path(self.out_dir) / "charts"
         d.mkdir(parents=True, exist_ok=True)
         return d
-
-    def bank(self) -> Any:
-        """The shared :class:`validation.scenes.SceneBank` (rendered on first use)."""
-        if "bank" not in self.shared:
-            from .scenes import SceneBank
-
-            self.shared["bank"] = SceneBank(self.level, progress=self.progress)
-        return self.shared["bank"]

@@ -41,7 +41,7 @@ from physrelight import image_model, sh
 
 from . import charts
 from .common import LUMINANCE, CheckResult, Context
-from .scenes import BankView
+from .scenes import BankView, bank, scene_label
 from .renderer_irradiance import lighting_yardstick
 from .shadow_loss import chw, exact_shading
 
@@ -168,7 +168,7 @@ SUMMARY = (
 
 def run(ctx: Context) -> CheckResult:
     res = CheckResult("lighting_solve", "4. Lighting solve", SUMMARY)
-    per = [evaluate_view(v) for v in ctx.bank().views()]
+    per = [evaluate_view(v) for v in bank(ctx).views()]
     table = ["| view | pixels | observable dims | exact model: image error | ridge bound | unoccluded px | "
              "direct vs exact image | 4 noise norms + q + ray res. | verdict |",
              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
@@ -210,7 +210,7 @@ def run(ctx: Context) -> CheckResult:
     # Cross-view: pairs of views of one scene under one lighting.
     cross = []
     groups: dict[tuple[int, str], list[tuple[BankView, dict[str, Any]]]] = {}
-    for v, f in zip(ctx.bank().views(), per):
+    for v, f in zip(bank(ctx).views(), per):
         groups.setdefault((v.scene_seed, v.lighting_name), []).append((v, f))
     ct = ["| scene / lighting | views | true L rotated (rel.) | solved: coefficients | solved: shading on B |",
           "| --- | --- | ---: | ---: | ---: |"]
@@ -219,7 +219,7 @@ def run(ctx: Context) -> CheckResult:
             R = vb.world_to_camera[:3, :3] @ va.world_to_camera[:3, :3].T
             D = np.asarray(sh.rotation(R, 2))
             true_err = rel(D @ fa["_L"], fb["_L"])
-            res.check(f"scene {seed} / {ln}: views {va.view_index}->{vb.view_index} true lighting rotates",
+            res.check(f"{scene_label(seed)} / {ln}: views {va.view_index}->{vb.view_index} true lighting rotates",
                       true_err, true_err <= 1e-9, "rel. difference <= 1e-9", "float64 round-off of D(R) and poses")
             solved = rel(D @ fa["_L_hat"], fb["_L_hat"])
             m = vb.mask()
@@ -228,7 +228,7 @@ def run(ctx: Context) -> CheckResult:
             shade = float(np.sqrt(((sa - sb) ** 2).mean() / (sb ** 2).mean()))
             cross.append({"scene": seed, "lighting": ln, "views": [va.view_index, vb.view_index],
                           "true_rel": true_err, "solved_rel": solved, "solved_shading_rel_rms": shade})
-            ct.append(f"| {seed} / {ln} | {va.view_index} -> {vb.view_index} | {true_err:.1e} | "
+            ct.append(f"| {scene_label(seed)} / {ln} | {va.view_index} -> {vb.view_index} | {true_err:.1e} | "
                       f"{100 * solved:.1f} % | {100 * shade:.1f} % |")
     res.tables.append("Cross-view: lighting solved in view A, rotated by the relative pose, against the lighting "
                       "solved in view B (paper set-up). The solved columns are diagnostic.\n\n" + "\n".join(ct))

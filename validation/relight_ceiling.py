@@ -40,7 +40,7 @@ from physrelight import colour, metrics
 from . import charts
 from .common import LUMINANCE, CheckResult, Context, binomial_upper, t_tail
 from .renderer_irradiance import lighting_yardstick
-from .scenes import BankView
+from .scenes import BankView, bank
 from .shadow_loss import chw, exact_shading, sh_shading
 
 STAGES = (("paper", "SH order 2, synth shadow, vs full render"),
@@ -117,7 +117,7 @@ SUMMARY = (
 
 def run(ctx: Context) -> CheckResult:
     res = CheckResult("relight_ceiling", "5. Relighting ceiling", SUMMARY)
-    views = ctx.bank().views()
+    views = bank(ctx).views()
     per = [evaluate_view(v) for v in views]
     lightings = list(dict.fromkeys(f["lighting"] for f in per))
     table = ["| stage | " + " | ".join(f"{ln} l1 / SSIM / PSNR" for ln in lightings) + " |",

@@ -159,7 +159,7 @@ def compare_case(shape: str, light: _lighting.Lighting, res: int, spp: int, seed
 def run(ctx: Context) -> CheckResult:
     lv = ctx.level
     res = CheckResult("renderer_irradiance", "1. Renderer vs exact irradiance", SUMMARY)
-    table = ["| shape | lighting | pixels | mean ratio | 4 se + q | |z|>4 share | allowed | verdict |",
+    table = ["| shape | lighting | pixels | mean ratio | 4 se + q | \\|z\\|>4 share | allowed | verdict |",
              "| --- | --- | ---: | ---: | ---: | ---: | ---: | --- |"]
     figs: dict[str, dict[str, Any]] = {}
     scatter: dict[str, tuple[np.ndarray, np.ndarray]] = {}

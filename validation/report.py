@@ -16,18 +16,8 @@ from typing import Any, Callable, Sequence
 
 from physrelight import io
 
-from .common import CheckResult, Context, Level, Stopwatch, jsonable, machine, machine_line
-
-CHECKS: tuple[tuple[str, str], ...] = (
-    ("renderer_irradiance", "validation.renderer_irradiance"),
-    ("sh_model", "validation.sh_model"),
-    ("shadow_loss", "validation.shadow_loss"),
-    ("lighting_solve", "validation.lighting_solve"),
-    ("relight_ceiling", "validation.relight_ceiling"),
-    ("speed", "validation.speed"),
-    ("gradients", "validation.gradients"),
-)
-"""``(key, module)`` in run order; each module has ``run(ctx) -> CheckResult``."""
+from .checks import CHECKS, check_keys
+from .common import CheckResult, Context, Level, Stopwatch, jsonable, machine, machine_line, md_cell
 
 HEADLINE = {
     "sphere_pathtrace_over_exact": ("renderer_irradiance", "sphere_pathtrace_over_exact"),
@@ -35,22 +25,6 @@ HEADLINE = {
     "shadow_free_loss": ("shadow_loss", "shadow_free_loss"),
     "lighting_solve_rel_error": ("lighting_solve", "lighting_solve_rel_error"),
 }
-
-
-def check_keys(selection: Sequence[str] | None) -> list[str]:
-    """Check keys to run: all, or a selection by key or number (``"1"``, ``"sh_model"``)."""
-    keys = [k for k, _ in CHECKS]
-    if not selection:
-        return keys
-    out = []
-    for s in selection:
-        if s.isdigit() and 1 <= int(s) <= len(keys):
-            out.append(keys[int(s) - 1])
-        elif s in keys:
-            out.append(s)
-        else:
-            raise ValueError(f"unknown check {s!r}; expected 1-{len(keys)} or one of {', '.join(keys)}")
-    return [k for k in keys if k in out]
 
 
 def run_checks(level: Level, out_dir: str | Path, command: str, selection: Sequence[str] | None = None,
@@ -66,7 +40,7 @@ def run_checks(level: Level, out_dir: str | Path, command: str, selection: Seque
     ctx.shared["results"] = {}
     results: list[CheckResult] = []
     with Stopwatch() as total:
-        for i, (key, module) in enumerate(CHECKS, start=1):
+        for i, (key, module, _) in enumerate(CHECKS, start=1):
             if key not in keys:
                 continue
             progress(f"check {i}/{len(CHECKS)}: {key} ...")
@@ -105,7 +79,8 @@ def _verdict_table(res: CheckResult, limit: int = 60) -> str:
     rows = ["| verdict | value | tolerance | where the tolerance comes from | |", "| --- | ---: | --- | --- | --- |"]
     ordered = sorted(res.verdicts, key=lambda v: v.passed)  # failures first
     for v in ordered[:limit]:
-        rows.append(f"| {v.name} | {v.value:.4g} | {v.tolerance} | {v.source} | {'pass' if v.passed else '**FAIL**'} |")
+        rows.append(f"| {md_cell(v.name)} | {v.value:.4g} | {md_cell(v.tolerance)} | {md_cell(v.source)} | "
+                    f"{'pass' if v.passed else '**FAIL**'} |")
     if len(ordered) > limit:
         rows.append(f"| ... {len(ordered) - limit} more (all passed; see report.json) | | | | |")
     return "\n".join(rows)

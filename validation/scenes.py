@@ -33,7 +33,7 @@ from synth import render as _render
 from synth.backend import load_mitsuba
 from synth.scene import Material, Part, SceneSpec, generate_scene
 
-from .common import LUMINANCE, Level
+from .common import LUMINANCE, Context, Level
 
 mi = load_mitsuba()
 
@@ -422,8 +422,7 @@ class BankView:
 
     @property
     def name(self) -> str:
-        scene = "sphere" if self.scene_seed == SPHERE_SEED else f"scene {self.scene_seed}"
-        return f"{scene} / view {self.view_index} / {self.lighting_name}"
+        return f"{scene_label(self.scene_seed)} / view {self.view_index} / {self.lighting_name}"
 
     @property
     def is_sphere(self) -> bool:
@@ -454,6 +453,11 @@ class BankView:
 
 SPHERE_SEED = -1
 """``scene_seed`` of the bank's sphere-on-ground scene (two views)."""
+
+
+def scene_label(seed: int) -> str:
+    """How reports and progress lines name a bank scene: ``"sphere"`` or ``"scene 7"``."""
+    return "sphere" if seed == SPHERE_SEED else f"scene {seed}"
 
 
 class SceneBank:
@@ -502,7 +506,7 @@ class SceneBank:
             self._tick("setup", t0)
             geo: dict[int, Any] = {}
             for li, lname in enumerate(lv.scene_lightings):
-                self._progress(f"scene bank: scene {seed} under {lname}")
+                self._progress(f"scene bank: {scene_label(seed)} under {lname}")
                 light = get_lighting(lname, lv.env_res)
                 t0 = time.perf_counter()
                 scene = _render.build_scene(spec, cams, light, spp=lv.scene_spp)
@@ -570,3 +574,10 @@ class SceneBank:
                         unoccluded=unoccluded, occlusion_resolution=resolution,
                         extra={"shadow_spp": lv.shadow_spp}))
         return out
+
+
+def bank(ctx: Context) -> SceneBank:
+    """The run's shared :class:`SceneBank` (rendered on first use, kept in ``ctx.shared``)."""
+    if "bank" not in ctx.shared:
+        ctx.shared["bank"] = SceneBank(ctx.level, progress=ctx.progress)
+    return ctx.shared["bank"]

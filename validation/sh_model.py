@@ -250,7 +250,7 @@ def run(ctx: Context) -> CheckResult:
 def _scene_errors(ctx: Context) -> dict[str, Any]:
     """Errors on the normals of the scene bank's surface pixels, grouped by lighting."""
     groups: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for v in ctx.bank().views():
+    for v in scenes.bank(ctx).views():
         surf = ~v.sky
         groups.setdefault(v.lighting_name, []).append((v.normal_world[surf], v.irradiance[surf]))
     out: dict[str, Any] = {}

@@ -40,7 +40,7 @@ from physrelight import image_model, losses
 
 from . import charts
 from .common import LUMINANCE, CheckResult, Context
-from .scenes import BankView
+from .scenes import BankView, bank
 
 SHADOW_PRECISION = 0.1
 """A pixel's direct ratio counts as measured when its standard error is below 10 % of it."""
@@ -157,7 +157,7 @@ SUMMARY = (
 
 def run(ctx: Context) -> CheckResult:
     res = CheckResult("shadow_loss", "3. Shadow-free loss with ground truth", SUMMARY)
-    views = ctx.bank().views()
+    views = bank(ctx).views()
     per: list[dict[str, Any]] = []
     for v in views:
         f = evaluate_view(v)

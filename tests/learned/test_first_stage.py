@@ -245,7 +245,7 @@ def test_08_exported_weights_load_offline_and_relight(tiny_dataset: Path, tiny_p
         assert ckpt.load_weights(tmp_path / "by_step" / f)[0].keys() == ckpt.load_weights(dest / f)[0].keys()
     assert main(args + ["--shadow-step", "5", "--dest", str(tmp_path / "none")]) == 2
     # --lighting-solve picks the lighting step the exported network runs (default: as trained).
-    from learned.train import load_inverse
+    from learned.networks import load_inverse
 
     assert main(args + ["--lighting-solve", "map_relative", "--dest", str(tmp_path / "rel")]) == 0
     assert load_inverse(tmp_path / "rel" / "inverse.safetensors").lighting_solve == "map_relative"
@@ -298,9 +298,9 @@ def test_10_init_warm_starts_from_another_run_and_refuses_a_mismatched_network(t
 
 
 def test_11_a_log_whose_metrics_gain_a_column_keeps_every_value_under_its_heading(tmp_path: Path) -> None:
-    from learned.train import _Logs
+    from learned.runs import RunLogs
 
-    logs = _Logs(tmp_path, 0, True)
+    logs = RunLogs(tmp_path, 0, True)
     logs.write("val.csv", 1, {"a": 1.0, "b": 2.0})
     logs.write("val.csv", 2, {"a": 3.0, "c": 4.0, "b": 5.0})  # a new metric, in another order
     logs.write("val.csv", 3, {"a": 6.0, "b": 7.0, "c": 8.0})
@@ -342,7 +342,7 @@ def test_12_the_lighting_shading_error_sees_only_what_the_photo_faces() -> None:
 def test_13_the_map_lighting_solve_travels_with_the_network(tiny_dataset: Path, tiny_prior: Path,
                                                             tmp_path: Path) -> None:
     from learned.objectives import decompose_and_solve
-    from learned.train import load_inverse
+    from learned.networks import load_inverse
     from physrelight import image_model
 
     train(config(tiny_dataset, tmp_path / "map", tiny_prior, steps=2, ckpt_every=2, val_every=2,
@@ -410,7 +410,7 @@ def test_15_the_one_sided_mvs_stencil_supervises_more_pixels_with_the_same_norma
 def test_16_exports_are_byte_reproducible_and_carry_a_chosen_lighting_step(tiny_dataset: Path, tiny_prior: Path,
                                                                           tmp_path: Path) -> None:
     from learned.objectives import decompose_and_solve
-    from learned.train import load_inverse
+    from learned.networks import load_inverse
     from physrelight import image_model
 
     run = tmp_path / "map"
@@ -531,7 +531,7 @@ def test_20_mirror_averaging_is_exactly_mirror_symmetric_and_travels_with_the_ex
                                                                                      tmp_path: Path) -> None:
     from learned.networks import mirror_averaged
     from learned.objectives import decompose_and_solve
-    from learned.train import load_inverse
+    from learned.networks import load_inverse
 
     torch.manual_seed(0)
     net = InverseNet(4, 2).eval()
@@ -679,7 +679,7 @@ def test_23_a_metered_network_decomposes_a_photo_the_same_at_any_exposure(tiny_d
     from learned.checkpoint import read_metadata
     from learned.networks import EXPOSURE_KEY, log_average_luminance, metered
     from learned.objectives import decompose_and_solve
-    from learned.train import load_inverse
+    from learned.networks import load_inverse
 
     image = PairSampler(tiny_dataset, split="all", res=24).batch(2, 0).image
     # Scaling the linear tensor is a pure exposure change (the network takes any positive values).
@@ -889,7 +889,7 @@ def test_28_an_averaged_export_is_the_mean_of_the_checkpoints_weights(tiny_datas
                                                                       tmp_path: Path) -> None:
     from safetensors.torch import load_file
 
-    from learned.train import load_inverse
+    from learned.networks import load_inverse
     from physrelight.cli import main
 
     run = tmp_path / "inv"

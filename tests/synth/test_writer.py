@@ -182,3 +182,15 @@ def test_12_mvs_scale_is_checked(tmp_path: Path) -> None:
     for bad in (0, 5, 1.5, True):
         with pytest.raises(ValueError, match="mvs_scale"):
             writer.SynthConfig(**TINY, mvs_scale=bad)
+
+
+def test_13_an_existing_file_as_output_is_a_one_line_error(tmp_path: Path, capsys) -> None:
+    from physrelight.cli import main
+
+    f = tmp_path / "taken"
+    f.write_text("not a dataset")
+    for out in (f, f / "below"):
+        assert main(["synth", str(out), "--scenes", "1"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "Traceback" not in err and str(out) in err
+    assert f.read_text() == "not a dataset" and sorted(tmp_path.iterdir()) == [f]

@@ -106,3 +106,31 @@ def test_08_the_z_test_null_rate_follows_student_t() -> None:
     assert math.isclose(common.t_tail(4.0, 10_000), 6.3e-5, rel_tol=0.05)  # ~ normal tail
     assert common.t_tail(4.0, 7) > 10 * common.t_tail(4.0, 10_000)  # few seeds: heavier tails
     assert common.binomial_upper(0.01, 1000) > 0.01
+
+
+def test_09_report_md_tables_have_as_many_cells_per_row_as_their_header(quick_report: Path) -> None:
+    md = (quick_report / "report.md").read_text()
+    cells = lambda row: len(re.findall(r"(?<!\\)\|", row))  # noqa: E731  (unescaped pipes)
+    header = None
+    for line in md.splitlines():
+        if not line.startswith("|"):
+            header = None
+            continue
+        if header is None:
+            header = cells(line)
+        assert cells(line) == header, line
+    assert "scene -1" not in md  # the bank's sphere is named, not numbered
+
+
+def test_10_help_and_selection_count_every_check(capsys) -> None:
+    from validation.checks import CHECKS, check_keys
+    from validation.scenes import SPHERE_SEED, scene_label
+
+    with pytest.raises(SystemExit):
+        main(["validate", "--help"])
+    out = capsys.readouterr().out
+    assert f"numbers 1-{len(CHECKS)}" in " ".join(out.split())
+    for i, (_, _, what) in enumerate(CHECKS, start=1):
+        assert f"{i} {what}" in " ".join(out.split())
+    assert check_keys([str(len(CHECKS))]) == [CHECKS[-1][0]]
+    assert scene_label(SPHERE_SEED) == "sphere" and scene_label(7) == "scene 7"

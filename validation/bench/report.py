@@ -18,7 +18,7 @@ from .protocols import Pair
 from .strata import STRATA, members
 
 if TYPE_CHECKING:
-    from .run import MethodRun
+    from .scores import MethodRun
 
 DEGRADES = 1.25
 """A method *degrades* on a stratum when its l1 there exceeds its all-data l1 by this factor."""

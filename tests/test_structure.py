@@ -1,0 +1,133 @@
+"""Specification of the package layout, read from the source with ``ast`` (nothing is imported).
+
+Every ``import`` statement counts, also those inside functions and under ``TYPE_CHECKING``:
+a lazy import is still a dependency, and a circle of them is still a circle. The layers are
+physrelight (the physics core) -> synth, learned -> validation; the core imports none of the
+others, except the command line's entry module, which loads each stage's CLI.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("physrelight", "synth", "learned", "validation")
+UPPER = ("synth", "learned", "validation")
+CLI_ENTRY = "physrelight.cli"
+
+
+def _modules() -> dict[str, tuple[Path, bool]]:
+    """``{dotted name: (file, is a package __init__)}`` of every module of the four packages."""
+    out = {}
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            is_pkg = parts[-1] == "__init__"
+            out[".".join(parts[:-1] if is_pkg else parts)] = (path, is_pkg)
+    return out
+
+
+def _targets(module: str, is_pkg: bool, node: ast.Import | ast.ImportFrom, known: set[str]) -> set[str]:
+    """The project modules an import statement loads (``from pkg import sub`` counts as ``pkg.sub``)."""
+    if isinstance(node, ast.Import):
+        names = [a.name for a in node.names]
+    else:
+        if node.level:  # relative: from the module's package, up level - 1
+            base = module.split(".") if is_pkg else module.split(".")[:-1]
+            base = base[:len(base) - (node.level - 1)]
+            prefix = ".".join(base + ([node.module] if node.module else []))
+        else:
+            prefix = node.module or ""
+        names = [f"{prefix}.{a.name}" if f"{prefix}.{a.name}" in known else prefix for a in node.names]
+    return {n for n in names if n in known}
+
+
+def import_graph() -> dict[str, set[str]]:
+    """``{module: the project modules it imports}``, from every import statement of its source."""
+    modules = _modules()
+    known = set(modules)
+    graph = {}
+    for name, (path, is_pkg) in modules.items():
+        tree = ast.parse(path.read_text(), filename=str(path))
+        deps: set[str] = set()
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                deps |= _targets(name, is_pkg, node, known)
+        graph[name] = deps - {name}
+    return graph
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                comp = []
+                while True:
+                    m = stack.pop()
+                    on_stack.discard(m)
+                    comp.append(m)
+                    if m == node:
+                        break
+                if len(comp) > 1:
+                    found.append(sorted(comp))
+    return found
+
+
+def test_01_the_graph_sees_lazy_and_relative_imports() -> None:
+    graph = import_graph()
+    # a function-level import, a relative one and a from-package-import-module one
+    assert "validation.relight_demo" in graph["physrelight.cli"]
+    assert "learned.checkpoint" in graph["learned.networks"]
+    assert "synth.writer" in graph["synth.dataset"]
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert circles({"a": {"b"}, "b": set()}) == []
+
+
+def test_02_no_import_circles() -> None:
+    found = circles(import_graph())
+    assert not found, "import circles: " + "; ".join(" <-> ".join(c) for c in found)
+
+
+def test_03_the_physics_core_imports_no_stage_but_through_the_cli_entry() -> None:
+    graph = import_graph()
+    bad = {m: sorted(d for d in deps if d.split(".")[0] in UPPER)
+           for m, deps in graph.items() if m.split(".")[0] == "physrelight" and m != CLI_ENTRY}
+    bad = {m: d for m, d in bad.items() if d}
+    assert not bad, f"physrelight/ reaches up outside {CLI_ENTRY}: {bad}"
+
+
+@pytest.mark.parametrize("lower, upper", [("synth", "learned"), ("synth", "validation"), ("learned", "validation")])
+def test_04_layers_point_down(lower: str, upper: str) -> None:
+    graph = import_graph()
+    bad = {m: sorted(d for d in deps if d.split(".")[0] == upper)
+           for m, deps in graph.items() if m.split(".")[0] == lower}
+    assert not {m: d for m, d in bad.items() if d}
