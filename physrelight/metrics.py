@@ -47,6 +47,9 @@ __all__ = [
     "delta_e2000",
     "delta_e2000_map",
     "ciede2000",
+    "mask_iou",
+    "mask_boundary",
+    "boundary_f",
 ]
 
 _REDUCTIONS = ("mean", "none")
@@ -523,3 +526,71 @@ def delta_e2000(
     """
     pair = _prepare(pred, target, mask, reduction, channels=3)
     return _finish(_masked_mean(_delta_e_pixels(pair, encoding), pair.mask), pair, reduction)
+
+
+# ----------------------------------------------------------------------------- masks (segmentation)
+
+
+def _binary_mask(x: Array, name: str) -> torch.Tensor:
+    t, _ = to_tensor(x, name)
+    if t.ndim != 2:
+        raise ValueError(f"{name} must be an (H, W) mask, got shape {tuple(t.shape)}")
+    check_finite(t, name)
+    if not bool(((t == 0) | (t == 1)).all()):
+        raise ValueError(f"{name} must be boolean or hold only 0 and 1")
+    return t > 0.5
+
+
+def _check_pair_masks(pred: Array, target: Array) -> tuple[torch.Tensor, torch.Tensor]:
+    p, t = _binary_mask(pred, "pred"), _binary_mask(target, "target")
+    if p.shape != t.shape:
+        raise ValueError(f"pred {tuple(p.shape)} and target {tuple(t.shape)} must have the same shape")
+    return p, t
+
+
+def mask_iou(pred: Array, target: Array) -> float:
+    """Intersection over union of two ``(H, W)`` masks; 1 when both are empty (they agree: no region)."""
+    p, t = _check_pair_masks(pred, target)
+    union = int((p | t).sum())
+    return 1.0 if union == 0 else int((p & t).sum()) / union
+
+
+def mask_boundary(mask: Array) -> Array:
+    """``(H, W)`` bool: the pixels of ``mask`` with a 4-neighbour outside it (the image border is not a boundary)."""
+    m = _binary_mask(mask, "mask")
+    pad = F.pad(m[None, None].float(), (1, 1, 1, 1), mode="replicate")[0, 0] > 0.5
+    inner = pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:]
+    out = m & ~inner
+    return out if isinstance(mask, torch.Tensor) else out.numpy()
+
+
+def _within(b: torch.Tensor, tolerance: float) -> torch.Tensor:
+    """Pixels within Euclidean distance ``tolerance`` of a True pixel of ``b`` ``(H, W)``."""
+    r = int(math.floor(tolerance))
+    if r <= 0:
+        return b
+    d = torch.arange(-r, r + 1, dtype=torch.float32)
+    disk = ((d[:, None] ** 2 + d[None, :] ** 2) <= tolerance**2 + 1e-9).float()[None, None]
+    return F.conv2d(b[None, None].float(), disk, padding=r)[0, 0] > 0.5
+
+
+def boundary_f(pred: Array, target: Array, tolerance: float = 2.0) -> float:
+    """Boundary F-score of two ``(H, W)`` masks (Martin et al.; the DAVIS ``F`` measure).
+
+    Precision: the fraction of ``pred``'s boundary pixels (:func:`mask_boundary`) within
+    ``tolerance`` pixels (Euclidean) of ``target``'s boundary; recall the other way round;
+    ``F = 2 P R / (P + R)``. Two masks without a boundary (both empty or both full) score 1;
+    one without, against one with, 0.
+    """
+    if not (isinstance(tolerance, (int, float)) and math.isfinite(tolerance) and tolerance >= 0):
+        raise ValueError(f"tolerance must be a finite number >= 0 of pixels, got {tolerance!r}")
+    p, t = _check_pair_masks(pred, target)
+    bp, bt = torch.as_tensor(mask_boundary(p)), torch.as_tensor(mask_boundary(t))
+    n_p, n_t = int(bp.sum()), int(bt.sum())
+    if n_p == 0 and n_t == 0:
+        return 1.0
+    if n_p == 0 or n_t == 0:
+        return 0.0
+    precision = int((bp & _within(bt, tolerance)).sum()) / n_p
+    recall = int((bt & _within(bp, tolerance)).sum()) / n_t
+    return 0.0 if precision + recall == 0 else 2.0 * precision * recall / (precision + recall)

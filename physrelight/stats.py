@@ -14,7 +14,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-__all__ = ["PairedDifference", "paired_bootstrap"]
+__all__ = ["MeanInterval", "PairedDifference", "hierarchical_bootstrap", "paired_bootstrap"]
 
 
 class PairedDifference(NamedTuple):
@@ -69,3 +69,49 @@ def paired_bootstrap(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.nd
     boot = sums[draw].sum(axis=1) / counts[draw].sum(axis=1)
     lo, hi = np.quantile(boot, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
     return PairedDifference(float(d.mean()), float(lo), float(hi), int(sums.size))
+
+
+class MeanInterval(NamedTuple):
+    """A mean and its ``level`` percentile-bootstrap interval ``[lo, hi]`` over ``groups`` groups of ``cases`` cases."""
+
+    mean: float
+    lo: float
+    hi: float
+    groups: int
+    cases: int
+
+
+def hierarchical_bootstrap(values: Sequence[float] | np.ndarray, groups: Sequence | np.ndarray,
+                           samples: int = 2000, seed: int = 0, level: float = 0.95) -> MeanInterval:
+    """Mean of ``values`` with a two-stage bootstrap interval: groups, then cases within each group.
+
+    Each resample draws the groups (e.g. panoramas) with replacement, then, within each drawn
+    group, its cases (e.g. crops of that panorama) with replacement, and takes the mean of all
+    drawn cases. Both sources of spread enter: which places were photographed and which views
+    of them. With a single group it is the ordinary bootstrap over its cases.
+
+    Args:
+        values: ``(N,)`` finite per-case scores. groups: ``(N,)`` group label of each case.
+        samples, seed, level: as :func:`paired_bootstrap`.
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    labels = np.asarray(groups).ravel()
+    if v.size == 0:
+        raise ValueError("hierarchical_bootstrap needs at least one case")
+    if labels.size != v.size:
+        raise ValueError(f"groups has {labels.size} labels for {v.size} cases")
+    if not np.isfinite(v).all():
+        raise ValueError("values must be finite")
+    if not (isinstance(samples, int) and samples >= 1):
+        raise ValueError(f"samples must be a positive integer, got {samples!r}")
+    if not (0.0 < level < 1.0):
+        raise ValueError(f"level must be in (0, 1), got {level!r}")
+    _, inverse = np.unique(labels, return_inverse=True)
+    members = [v[inverse == g] for g in range(inverse.max() + 1)]
+    rng = np.random.default_rng(seed)
+    boot = np.empty(samples)
+    for s in range(samples):
+        drawn = [members[g] for g in rng.integers(0, len(members), size=len(members))]
+        boot[s] = np.concatenate([m[rng.integers(0, m.size, size=m.size)] for m in drawn]).mean()
+    lo, hi = np.quantile(boot, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
+    return MeanInterval(float(v.mean()), float(lo), float(hi), len(members), int(v.size))

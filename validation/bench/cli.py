@@ -25,11 +25,52 @@ cores, CI); --full uses --data (default data/heldout) plus generated strata and 
 """
 
 
+REAL_DESCRIPTION = """
+--real: the pipeline on real photos whose lighting is known exactly. Pinhole crops of real HDR
+panoramas (45-75 deg, level, pitch -5..20 deg, made into 8-bit photos) are scored for (a) sky
+segmentation, (b) lighting from the photo, (c) the relit sky against the target panorama seen
+through the same camera, (d) self-relighting, with (e) panels; writes OUT/real.md, OUT/real.json,
+OUT/charts/real_summary.png and OUT/panels/. Default panoramas: the shipped ones (city, courtyard,
+forest: seen in training; studio: indoor, apart; sunrise: held out); --hdri-dir scores a folder of
+your own lat-long .exr/.hdr maps. --quick: 4 crops per panorama, 2 targets; --full: 16 and 3.
+"""
+
+
+def _real(args: argparse.Namespace, command: str, progress) -> int:
+    from synth.panorama_crops import crop_cameras, folder_panoramas
+
+    from .real import REAL_LEVELS, run_real_bench
+
+    crop_cameras(1, 0, tuple(args.fov))  # a bad --fov fails here, before any work
+    if args.hdri_dir is not None:
+        folder_panoramas(args.hdri_dir)  # an empty or broken folder fails here too
+    level = REAL_LEVELS["full" if args.full else "quick"]
+    report = run_real_bench(level, args.hdri_dir, args.output, command, threads=args.threads, progress=progress,
+                            weights=args.weights, seed=args.seed, fov_range=tuple(args.fov))
+    print(f"bench --real done in {report['seconds']:.0f} s ({len(report['crops'])} crops) -> {args.output}/real.md")
+    return 0
+
+
 def _handler(args: argparse.Namespace) -> int:
     from .run import LEVELS, run_bench
 
-    level = LEVELS["full" if args.full else "quick"]
     words = ["physrelight", "bench", "--full" if args.full else "--quick"]
+    progress = (lambda msg: None) if args.quiet else (lambda msg: print(msg, flush=True))
+    if args.real:
+        words.insert(2, "--real")
+        if args.hdri_dir is not None:
+            words += ["--hdri-dir", args.hdri_dir]
+        if tuple(args.fov) != (45.0, 75.0):
+            words += ["--fov", f"{args.fov[0]:g}", f"{args.fov[1]:g}"]
+        if args.seed != 0:
+            words += ["--seed", str(args.seed)]
+        words += ["-o", args.output]
+        if args.weights is not None:
+            words += ["--weights", args.weights]
+        return _real(args, " ".join(shlex.quote(w) for w in words), progress)
+    if args.hdri_dir is not None:
+        raise ValueError("--hdri-dir goes with --real (the synthetic bench takes --data)")
+    level = LEVELS["full" if args.full else "quick"]
     if args.data:
         words += ["--data", args.data]
     words += ["-o", args.output]
@@ -40,7 +81,6 @@ def _handler(args: argparse.Namespace) -> int:
     if args.weights is not None:
         words += ["--weights", args.weights]
     command = " ".join(shlex.quote(w) for w in words)
-    progress = (lambda msg: None) if args.quiet else (lambda msg: print(msg, flush=True))
     report = run_bench(level, args.data, args.output, command, threads=args.threads, runs_dir=args.runs,
                        with_abs=not args.no_abs, progress=progress, weights=args.weights)
     v = report["verdicts"]
@@ -54,7 +94,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from physrelight.cli import positive_int
 
     p = sub.add_parser("bench", help="relighting benchmark: methods x protocols x strata, speed vs accuracy",
-                       description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=DESCRIPTION + REAL_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_mutually_exclusive_group()
     g.add_argument("--quick", action="store_true", help="small run for CI, a few minutes on 2 cores (default)")
     g.add_argument("--full", action="store_true", help="the run the docs quote (data/heldout + generated scenes)")
@@ -68,5 +108,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-abs", action="store_true", help="skip the (slow) analysis-by-synthesis baseline")
     p.add_argument("--weights", default=None, metavar="DIR",
                    help="weights folder of the learned methods (default: the shipped learned/weights)")
+    p.add_argument("--real", action="store_true", help="real photos: crops of real HDR panoramas (see above)")
+    p.add_argument("--hdri-dir", default=None, metavar="DIR",
+                   help="with --real: a folder of lat-long .exr/.hdr panoramas to score (default: the shipped ones)")
+    p.add_argument("--fov", nargs=2, type=float, default=[45.0, 75.0], metavar=("LO", "HI"),
+                   help="with --real: the crops' horizontal field of view range in degrees (default: 45 75)")
+    p.add_argument("--seed", type=int, default=0, help="with --real: crops, photo noise and SkyGAN noise (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_handler)

@@ -1,0 +1,195 @@
+"""Pinhole views of a lat-long panorama: real photos with known lighting, and the exact sky of a target.
+
+A panorama (an environment map, :mod:`physrelight.envmap`) is the radiance arriving at one
+point from every direction. A pinhole camera at that point sees, through pixel ``(u, v)``,
+the radiance along the pixel's ray: the map looked up in the ray's world direction. So a
+view of a real HDR panorama is a real photo whose lighting is exactly known (the whole map,
+turned into the camera frame), and a view of a *target* panorama through a photo's camera
+is that target's sky as the photo would show it.
+
+Conventions:
+
+* camera frame, pixel coordinates and ``K``: :mod:`physrelight.camera` (x right, y up, the
+  camera looks down -z; pixel centres at ``(j + 0.5, i + 0.5)``);
+* world frame Y up; :func:`level_camera`'s yaw turns from world -Z towards +X (clockwise
+  seen from above, like ``relight --sun``'s azimuth), its pitch lifts the view above the
+  horizon, roll is 0 (a level horizon).
+
+Antialiasing: a pixel is the mean of ``samples x samples`` sub-pixel rays on a regular
+grid, each a bilinear lookup of the map (:func:`physrelight.envmap.sample`, Mitsuba's
+interpolant): a box filter of the pixel's footprint. :func:`native_width` gives the widest
+view whose every pixel covers at least one texel, so a view never invents detail the
+panorama does not have.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from physrelight import envmap
+from physrelight._checks import Array, check_finite, check_rotation, to_tensor
+from physrelight.camera import intrinsics_from_fov, look_at
+
+__all__ = ["MAX_FOV_DEG", "camera_rays", "level_camera", "look_up", "native_width", "view", "view_intrinsics", "view_mask"]
+
+MAX_FOV_DEG = 179.0
+"""Widest horizontal field of view a pinhole view may have (180 deg is a plane at infinity)."""
+
+
+def level_camera(yaw_deg: float, pitch_deg: float) -> np.ndarray:
+    """``(4, 4)`` world-to-camera transform of a level camera at the origin.
+
+    Args:
+        yaw_deg: viewing direction's azimuth: 0 looks along world -Z, 90 along +X.
+        pitch_deg: elevation of the viewing direction, in (-90, 90); positive looks up.
+
+    Returns:
+        float64 rigid transform (zero translation; :func:`physrelight.camera.look_at` with up = +Y).
+    """
+    if not (math.isfinite(yaw_deg) and math.isfinite(pitch_deg)) or not -90.0 < pitch_deg < 90.0:
+        raise ValueError(f"yaw must be finite and pitch in (-90, 90) degrees, got yaw={yaw_deg}, pitch={pitch_deg}")
+    y, p = math.radians(yaw_deg), math.radians(pitch_deg)
+    forward = np.array([math.sin(y) * math.cos(p), math.sin(p), -math.cos(y) * math.cos(p)])
+    return np.asarray(look_at(np.zeros(3), forward, np.array([0.0, 1.0, 0.0])))
+
+
+def native_width(fov_x_deg: float, height_over_width: float, panorama_width: int) -> int:
+    """The widest view (pixels) of a ``panorama_width``-wide map whose every pixel covers a texel.
+
+    A pinhole pixel at angle ``alpha`` off the axis subtends the solid angle
+    ``cos(alpha)^3 / f^2`` (``f`` the focal length in pixels): smallest in the corners. A
+    texel at the equator subtends ``(2 pi / W)^2``. Equating the two in the corner gives
+    ``width = W tan(fov / 2) cos(alpha_corner)^1.5 / pi``, rounded down: every pixel then
+    averages at least one texel, so the view is never upsampled past the panorama.
+
+    Args:
+        fov_x_deg: horizontal field of view, in (0, :data:`MAX_FOV_DEG`].
+        height_over_width: the view's aspect, height / width (0.75 for 4:3 landscape).
+        panorama_width: the map's width W in texels.
+    """
+    _check_fov(fov_x_deg)
+    if not (math.isfinite(height_over_width) and height_over_width > 0):
+        raise ValueError(f"height_over_width must be a positive number, got {height_over_width}")
+    if panorama_width < 4:
+        raise ValueError(f"panorama_width must be at least 4 texels, got {panorama_width}")
+    t = math.tan(math.radians(fov_x_deg) / 2.0)
+    cos_corner = 1.0 / math.sqrt(1.0 + t * t * (1.0 + height_over_width**2))
+    return max(1, int(panorama_width * t * cos_corner**1.5 / math.pi))
+
+
+def _check_fov(fov_x_deg: float) -> None:
+    if not (math.isfinite(fov_x_deg) and 0.0 < fov_x_deg <= MAX_FOV_DEG):
+        raise ValueError(f"a pinhole view's field of view must lie in (0, {MAX_FOV_DEG:g}] degrees, got {fov_x_deg}")
+
+
+def _rotation(world_to_camera: Array) -> torch.Tensor:
+    r, _ = to_tensor(world_to_camera, "world_to_camera", torch.float64)
+    if r.shape == (4, 4):
+        r = r[:3, :3]
+    if r.shape != (3, 3):
+        raise ValueError(f"world_to_camera must have shape (4, 4) or (3, 3), got {tuple(r.shape)}")
+    check_finite(r, "world_to_camera")
+    check_rotation(r, "world_to_camera")
+    return r
+
+
+def _check_size(height: int, width: int, samples: int) -> None:
+    for name, v in (("height", height), ("width", width), ("samples", samples)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{name} must be a positive integer, got {v!r}")
+
+
+def camera_rays(K: Array, world_to_camera: Array, height: int, width: int, samples: int = 1,
+                rows: slice | None = None) -> torch.Tensor:
+    """World directions of a pinhole camera's sub-pixel rays.
+
+    Args:
+        K: ``(3, 3)`` intrinsics (:mod:`physrelight.camera`).
+        world_to_camera: ``(4, 4)`` or ``(3, 3)``; only the rotation is used (a panorama is at infinity).
+        height, width: image size.
+        samples: rays per pixel along each axis, on the regular grid ``(k + 0.5) / samples``.
+        rows: only these image rows (None: all).
+
+    Returns:
+        torch float64 ``(h, width, samples**2, 3)`` unit directions, world frame (``h`` rows).
+    """
+    _check_size(height, width, samples)
+    Kt, _ = to_tensor(K, "K", torch.float64)
+    if Kt.shape != (3, 3):
+        raise ValueError(f"K must have shape (3, 3), got {tuple(Kt.shape)}")
+    check_finite(Kt, "K")
+    R = _rotation(world_to_camera)
+    i = torch.arange(height, dtype=torch.float64)[rows if rows is not None else slice(None)]
+    j = torch.arange(width, dtype=torch.float64)
+    s = (torch.arange(samples, dtype=torch.float64) + 0.5) / samples
+    v = (i[:, None, None, None] + s[None, None, :, None]).expand(-1, width, samples, samples)
+    u = (j[None, :, None, None] + s[None, None, None, :]).expand(len(i), -1, samples, samples)
+    uv1 = torch.stack([u, v, torch.ones_like(u)], dim=-1).reshape(len(i), width, samples * samples, 3)
+    vision = uv1 @ torch.linalg.inv(Kt).T  # x right, y down, z forward
+    cam = vision * torch.tensor([1.0, -1.0, -1.0], dtype=torch.float64)  # our camera frame
+    world = cam @ R  # R^T d for row vectors
+    return world / torch.linalg.vector_norm(world, dim=-1, keepdim=True)
+
+
+def view(env: Array, K: Array, world_to_camera: Array, height: int, width: int, samples: int = 4,
+         chunk_rays: int = 1 << 20) -> Array:
+    """The panorama as a pinhole camera at its centre sees it: linear radiance per pixel.
+
+    Args:
+        env: ``(He, We, 3)`` lat-long map (world frame; :func:`physrelight.envmap.check_envmap`).
+        K: ``(3, 3)`` intrinsics of the view; world_to_camera: ``(4, 4)`` or ``(3, 3)``.
+        height, width: the view's size in pixels.
+        samples: sub-pixel rays per axis (``samples**2`` per pixel). 4 and 8 agree within 1 %
+            (relative l1) on the shipped panoramas at :func:`native_width`.
+        chunk_rays: rays looked up at once (memory bound).
+
+    Returns:
+        ``(height, width, 3)`` radiance, the type of ``env`` (float64 for numpy input).
+    """
+    e, restore = to_tensor(env, "env")
+    envmap.check_envmap(e, "env")
+    _check_size(height, width, samples)
+    rows_per_chunk = max(1, chunk_rays // (width * samples * samples))
+    out = []
+    for r0 in range(0, height, rows_per_chunk):
+        d = camera_rays(K, world_to_camera, height, width, samples, slice(r0, min(height, r0 + rows_per_chunk)))
+        out.append(look_up(e, d))
+    return restore(torch.cat(out, dim=0))
+
+
+def look_up(env: torch.Tensor, rays: torch.Tensor) -> torch.Tensor:
+    """Box-filtered lookup: ``env (He, We, C)`` torch map, ``rays (h, w, S, 3)`` world directions
+    (:func:`camera_rays`) -> ``(h, w, C)``, the mean of the bilinear lookups of each pixel's ``S`` rays.
+
+    For several maps seen through one camera (a photo, its sky mask, targets), make the rays
+    once. ``C`` is 3 (a map) or 1 (a mask); no checks beyond :func:`physrelight.envmap.sample`'s."""
+    if env.ndim == 3 and env.shape[-1] == 1:
+        return look_up(env.expand(-1, -1, 3).contiguous(), rays)[..., :1]
+    return envmap.sample(env, rays.to(env.dtype)).mean(dim=-2)
+
+
+def view_mask(mask: Array, K: Array, world_to_camera: Array, height: int, width: int, samples: int = 4) -> Array:
+    """Fraction of each pixel of a view covered by a panorama mask.
+
+    Args:
+        mask: ``(He, We)`` bool or float in [0, 1] on the panorama's texels (e.g. its sky).
+        K, world_to_camera, height, width, samples: as for :func:`view`.
+
+    Returns:
+        ``(height, width)`` coverage in [0, 1] (threshold at 0.5 for a mask of the view), type of ``mask``.
+    """
+    m, restore = to_tensor(mask, "mask")
+    if m.ndim != 2:
+        raise ValueError(f"mask must have shape (H, W), got {tuple(m.shape)}")
+    cover = view(m[..., None].expand(-1, -1, 3).contiguous(), K, world_to_camera, height, width, samples)
+    return restore(cover[..., 0].clamp(0.0, 1.0))  # bilinear weights sum to 1: clamp only rounding
+
+
+def view_intrinsics(fov_x_deg: float, width: int, height: int) -> np.ndarray:
+    """``(3, 3)`` intrinsics of a view with horizontal field of view ``fov_x_deg`` (checked against :data:`MAX_FOV_DEG`)."""
+    _check_fov(fov_x_deg)
+    return np.asarray(intrinsics_from_fov(float(fov_x_deg), width, height), dtype=np.float64)
+

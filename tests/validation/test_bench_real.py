@@ -1,0 +1,119 @@
+"""Specification of ``physrelight bench --real``: the quick run end to end on the shipped panoramas
+(held-out sunrise apart, every section (a)-(e), its ceilings), the pieces it stands on, and the
+one-line refusals of bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physrelight import sh
+from physrelight.cli import main
+from validation.bench import real
+from validation.bench.real_report import cross_view
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("bench_real") / "report"
+    assert main(["bench", "--real", "--quick", "-o", str(out), "--threads", "1", "--quiet"]) == 0
+    return out
+
+
+def test_01_quick_run_writes_every_section_with_the_held_out_panorama_apart(quick) -> None:
+    report = json.loads((quick / "real.json").read_text())
+    md = (quick / "real.md").read_text()
+    assert report["command"] == f"physrelight bench --real --quick -o {quick}"
+    assert {c["panorama"] for c in report["crops"]} == {"city", "courtyard", "forest", "studio", "sunrise"}
+    assert len(report["crops"]) == 20
+    assert set(report["summary"]) == {"heldout", "training", "indoor"}
+    assert report["summary"]["heldout"]["panoramas"] == ["sunrise"]
+    for title in ("(a) Sky segmentation", "(b) Lighting", "(c) The relit sky", "(d) Self-relighting", "(e) Panels",
+                  "seen in training", "held out (sunrise)"):
+        assert title in md
+    for p in report["panels"] + report["charts"]:
+        assert (quick / p).is_file()
+
+
+def test_02_the_ceilings_are_ceilings(quick) -> None:
+    """The exact target view beats every other sky source wherever there is sky; the panorama's own
+    order-2 truncation beats every estimate of the lighting; identity self-relights exactly."""
+    s = json.loads((quick / "real.json").read_text())["summary"]
+    for g in ("heldout", "training"):
+        sky = s[g]["sky"]
+        assert all(sky["exact_view"]["l1"]["mean"] < sky[o]["l1"]["mean"] for o in ("skygan", "sh_radiance", "keep"))
+        light = s[g]["lighting"]
+        assert light["truth_order2"]["shading_error"]["mean"] < 0.1
+        assert all(light["truth_order2"]["shading_error"]["mean"] < light[e]["shading_error"]["mean"]
+                   for e in ("proposed", "prior_mean"))
+        for iv in (sky["skygan"]["psnr"], light["proposed"]["shading_error"]):
+            assert iv["lo"] <= iv["mean"] <= iv["hi"]
+    crops = json.loads((quick / "real.json").read_text())["crops"]
+    assert all(c["self"] is None or c["self"]["identity"]["l1"] == 0.0 for c in crops)
+    assert all(c["sky"] == {} for c in crops if c["stratum"] == "no_sky")
+
+
+def test_03_shading_error_is_scale_invariant_and_sees_direction() -> None:
+    n = sh.fibonacci_sphere(128)
+    L = np.zeros((9, 3))
+    L[0] = 1.0
+    L[2] = 0.5  # light from above (+z in the frame of n)
+    E = np.asarray(sh.irradiance(L, n))
+    assert real.shading_error(E, E) < 1e-12
+    assert real.shading_error(7.3 * E, E) < 1e-12
+    flipped = L.copy()
+    flipped[2] = -0.5
+    assert real.shading_error(np.asarray(sh.irradiance(flipped, n)), E) > 0.2
+    assert real.shading_error(np.zeros_like(E), E) == 1.0
+    assert real.level_stops(2 * L, L) == pytest.approx(1.0)
+
+
+def test_04_cross_view_of_a_consistent_estimate_is_zero() -> None:
+    L = np.asarray(sh.project_sun(np.array([0.3, 0.8, -0.5]) / np.linalg.norm([0.3, 0.8, -0.5]), np.ones(3)))
+    crops = [{"panorama": "p", "world_sh": {"proposed": (L * k).tolist()}} for k in (1.0, 2.0, 0.5)]
+    errs = cross_view(crops, sh.fibonacci_sphere(64), "proposed")
+    assert len(errs) == 3 and max(e for _, e in errs) < 1e-12
+
+
+def test_05_baselines_top_rows_and_otsu_brightness() -> None:
+    top = real.top_rows_sky(9, 4)
+    assert top[:3].all() and not top[3:].any()
+    img = np.full((10, 10, 3), 0.1)
+    img[:4] = 0.9
+    np.testing.assert_array_equal(real.brightness_sky(img)[:, 0], np.arange(10) < 4)
+
+
+def _exr(path: Path, env: np.ndarray) -> None:
+    import OpenEXR
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"RGB": np.ascontiguousarray(env, dtype=np.float32)}) as f:
+        f.write(str(path))
+
+
+@pytest.mark.parametrize("case", ["not_2_1", "nan", "negative", "empty", "fov"])
+def test_06_bad_input_gets_one_line_and_a_non_zero_exit_before_any_work(tmp_path, capsys, case) -> None:
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    env = np.ones((16, 32, 3), np.float32)
+    if case == "not_2_1":
+        env = np.ones((16, 20, 3), np.float32)
+    elif case == "nan":
+        env[2, 2, 0] = math.nan
+    elif case == "negative":
+        env[2, 2, 0] = -1.0
+    if case != "empty":
+        _exr(maps / "m.exr", env)
+    out = tmp_path / "out"
+    args = ["bench", "--real", "--hdri-dir", str(maps), "-o", str(out)]
+    if case == "fov":
+        args += ["--fov", "60", "181"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("physrelight: error:") and "\n" not in err
+    assert {"not_2_1": "2:1", "nan": "NaN", "negative": "negative", "empty": "no .exr", "fov": "179"}[case] in err
+    assert not out.exists()

@@ -1,0 +1,318 @@
+"""``physrelight bench --real``: the pipeline on real photos whose lighting is known exactly.
+
+The photos are pinhole crops of real HDR panoramas (:mod:`synth.panorama_crops`): the
+panorama is the exact lighting of each crop, its reviewed sky mask gives the true sky, and
+another panorama seen through the same camera is the exact relit sky. Per crop:
+
+(a) **sky segmentation** at full resolution: IoU and boundary F (2 px) of the shipped
+    segmenter and two baselines (the top third of the rows; pixels brighter than Otsu's
+    threshold on the photo's luminance); on crops without sky, the fraction wrongly called sky;
+(b) **lighting from the photo**: the order-2 estimate's irradiance on the unit sphere
+    against the panorama's exact (brute-force) irradiance, scale-invariant (the best single
+    gain, :func:`shading_error`), and its level error in stops; baselines the prior's mean
+    and, as the ceiling, the panorama's own order-2 truncation; plus cross-view consistency
+    (two crops of one panorama, their estimates turned into the world frame);
+(c) **the relit sky**: each crop relit to other panoramas (env-map targets); its sky pixels
+    against the target seen through the same camera at the output's exposure, l1 and PSNR
+    in sRGB over the true sky; sky sources: SkyGAN (the pipeline's), the target's order-2
+    SH radiance, the photo's own sky kept, and the exact target view (the ceiling with the
+    segmenter's mask);
+(d) **self-relighting**: the target is the crop's own panorama, so the output should be the
+    input: foreground l1, SSIM, PSNR at full resolution;
+(e) **panels** for the eye (``OUT/panels/``).
+
+Protocol. Methods get the photo, the segmenter's sky mask and the target, as the user's
+``relight`` does, plus the source lighting's level, as the synthetic bench's protocol does
+(``source_lighting``: the crop's camera-frame SH in the photo's linear units). Panoramas are
+not calibrated to one another, so each target is scaled to the source's level (equal DC
+luminance): the relit photo is what the same camera, metered the same way, would see under
+the target; its exact sky is the target's view times that same scale.
+"""
+
+from __future__ import annotations
+
+import datetime
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import torch
+
+from physrelight import colour, envmap, metrics, panorama, sh
+
+__all__ = ["REAL_LEVELS", "RealLevel", "brightness_sky", "run_real_bench", "shading_error", "top_rows_sky"]
+
+SEGMENTERS = ("segmenter", "top_rows", "brightness")
+ESTIMATES = ("proposed", "prior_mean", "truth_order2")
+SKY_SOURCES = ("skygan", "sh_radiance", "keep", "exact_view")
+SELF_METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity")
+BOUNDARY_TOLERANCE = 2.0
+SPHERE_NORMALS = 256
+TOP_ROWS_FRACTION = 1.0 / 3.0
+
+
+@dataclass(frozen=True)
+class RealLevel:
+    """The size of a ``bench --real`` run.
+
+    Attributes:
+        name: ``"quick"`` or ``"full"``.
+        crops: crops per panorama. targets: target panoramas per crop for (c).
+        samples: sub-pixel rays per axis of every view (4: within 0.1 % of 8).
+        panels: crops per panorama with a panel (e).
+        bootstrap: resamples of every interval.
+    """
+
+    name: str
+    crops: int
+    targets: int
+    samples: int = 4
+    panels: int = 1
+    bootstrap: int = 2000
+
+    def to_json(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+REAL_LEVELS = {"quick": RealLevel("quick", crops=4, targets=2, panels=1, bootstrap=1000),
+               "full": RealLevel("full", crops=16, targets=3, panels=4)}
+
+
+# ----------------------------------------------------------------------------- small pieces
+
+
+def shading_error(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """Scale-invariant relative error ``min_a ||a E_hat - E|| / ||E||`` of ``(N, 3)`` irradiances.
+
+    One gain for all channels, so a wrong colour counts and a wrong level (the albedo-lighting
+    ambiguity, the camera's exposure) does not. 1 for an estimate that is all zero.
+    """
+    e, t = np.asarray(estimate, np.float64).ravel(), np.asarray(truth, np.float64).ravel()
+    den = float(e @ e)
+    a = float(e @ t) / den if den > 0 else 0.0
+    return float(np.linalg.norm(a * e - t) / max(np.linalg.norm(t), 1e-300))
+
+
+def _dc_luminance(coeffs: np.ndarray) -> float:
+    return float(np.asarray(coeffs)[0] @ np.asarray(colour.LUMINANCE))
+
+
+def level_stops(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """``log2`` of the DC luminance of ``estimate`` over ``truth`` ``(9, 3)`` (clipped at +-10 stops)."""
+    num, den = _dc_luminance(estimate), _dc_luminance(truth)
+    if num <= 0:
+        return -10.0
+    return float(np.clip(math.log2(num / den), -10.0, 10.0))
+
+
+def top_rows_sky(height: int, width: int, fraction: float = TOP_ROWS_FRACTION) -> np.ndarray:
+    """Baseline sky: the top ``fraction`` of the rows (the horizon on the upper third line)."""
+    out = np.zeros((height, width), dtype=bool)
+    out[: int(round(fraction * height))] = True
+    return out
+
+
+def brightness_sky(display: np.ndarray) -> np.ndarray:
+    """Baseline sky: pixels whose luminance (display values) is above Otsu's threshold."""
+    y = np.asarray(display, np.float64) @ np.asarray(colour.LUMINANCE)
+    hist, edges = np.histogram(y, bins=256, range=(0.0, 1.0))
+    p = hist / max(hist.sum(), 1)
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    w0 = np.cumsum(p)
+    m0 = np.cumsum(p * centres)
+    between = (m0[-1] * w0 - m0) ** 2 / np.maximum(w0 * (1.0 - w0), 1e-12)
+    return y > edges[int(np.argmax(between)) + 1]
+
+
+def _chw(x: np.ndarray) -> torch.Tensor:
+    return torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32)).permute(2, 0, 1)[None]
+
+
+def _display(linear: torch.Tensor) -> torch.Tensor:
+    return colour.to_ldr(linear.clamp_min(0.0))
+
+
+def _camera_directions(K: np.ndarray, height: int, width: int) -> torch.Tensor:
+    """``(h, w, 3)`` camera-frame unit directions of the pixel centres."""
+    return panorama.camera_rays(K, np.eye(3), height, width, 1)[..., 0, :]
+
+
+def sh_radiance_image(coeffs: np.ndarray, directions: torch.Tensor) -> torch.Tensor:
+    """``(1, 3, h, w)`` radiance of order-2 SH ``coeffs (9, 3)`` along ``directions (h, w, 3)``, clamped at 0."""
+    y = torch.as_tensor(sh.basis(directions.double(), 2))
+    rad = (y @ torch.as_tensor(coeffs, dtype=torch.float64)).clamp_min(0.0)
+    return rad.permute(2, 0, 1)[None].float()
+
+
+# ----------------------------------------------------------------------------- one crop
+
+
+def _targets(pano: Any, panoramas: Sequence[Any], n: int, index: int) -> list[Any]:
+    """``n`` outdoor target panoramas other than ``pano``, cycling with the crop's index."""
+    others = [p for p in panoramas if p.name != pano.name and p.outdoor]
+    if not others:
+        return []
+    return [others[(index + k) % len(others)] for k in range(min(n, len(others)))]
+
+
+def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradiance: np.ndarray,
+               normals: np.ndarray, seed: int = 0) -> dict[str, Any]:
+    """Every figure of one crop: (a) segmentation, (b) lighting, (c) relit sky, (d) self-relighting."""
+    from .scores import score
+
+    h, w = crop.size
+    lin = crop.linear()
+    true_sky = torch.from_numpy(crop.sky)[None, None]
+    fg = ~true_sky
+    out: dict[str, Any] = {"panorama": crop.panorama.name, "group": crop.panorama.group, "index": crop.index,
+                           "stratum": crop.stratum, "sky_fraction": float(crop.sky.mean()), "size": [h, w],
+                           "camera": {"yaw_deg": crop.yaw_deg, "pitch_deg": crop.pitch_deg, "fov_deg": crop.fov_deg}}
+    seconds: dict[str, float] = {}
+
+    # (a) sky segmentation
+    t0 = time.perf_counter()
+    seg = relighter.sky_mask(lin)
+    seconds["segmenter"] = time.perf_counter() - t0
+    masks = {"segmenter": seg[0, 0].numpy(), "top_rows": top_rows_sky(h, w), "brightness": brightness_sky(crop.display())}
+    out["segmentation"] = {name: {"iou": metrics.mask_iou(m, crop.sky),
+                                  "boundary_f": metrics.boundary_f(m, crop.sky, BOUNDARY_TOLERANCE),
+                                  "sky_called": float(m.mean())} for name, m in masks.items()}
+
+    # (b) lighting, from the decomposition the relighting uses (segmenter's mask: end to end)
+    g = crop.gain
+    source = crop.lighting_sh(2) * g[None, :]  # camera frame, photo units
+    t0 = time.perf_counter()
+    full = relighter.relight_full_resolution(lin, seg, torch.from_numpy(source).float(),
+                                             source_lighting=torch.from_numpy(source).float(), method="proposed")
+    seconds["proposed"] = time.perf_counter() - t0
+    work = full["working"]
+    dec = {k: work[k] for k in ("albedo", "normals", "shadow", "lighting", "foreground")}
+    R = crop.rotation
+    cam_normals = normals @ R.T  # n_c = R n_w
+    truth = truth_irradiance * g[None, :]
+    estimates = {"proposed": work["lighting"][0].double().numpy(),
+                 "prior_mean": np.asarray(relighter.prior.mean, dtype=np.float64).reshape(9, 3)}
+    out["lighting"] = {}
+    for name, L in estimates.items():
+        E = np.asarray(sh.irradiance(L, cam_normals))
+        out["lighting"][name] = {"shading_error": shading_error(E, truth), "level_stops": level_stops(L, source)}
+    E2 = np.asarray(sh.irradiance(crop.panorama.sh(2) * g[None, :], normals))
+    out["lighting"]["truth_order2"] = {"shading_error": shading_error(E2, truth), "level_stops": 0.0}
+    out["world_sh"] = {name: np.asarray(sh.rotate(L, R.T)).tolist() for name, L in estimates.items()}
+
+    # (d) self-relighting: the target is the source; the output should be the photo
+    photo_disp = _chw(crop.display())
+    preds, names = [], []
+    for m in SELF_METHODS[:-1]:
+        t0 = time.perf_counter()
+        relit = relighter.relight_full_resolution(lin, seg, torch.from_numpy(source).float(),
+                                                  source_lighting=torch.from_numpy(source).float(), method=m,
+                                                  decomposition=dec)["relit"]
+        seconds.setdefault(m, time.perf_counter() - t0)
+        preds.append(torch.where(fg, _display(relit), photo_disp))
+        names.append(m)
+    preds.append(photo_disp)
+    names.append("identity")
+    if bool(fg.any()):
+        s = score(preds, [photo_disp] * len(preds), [fg] * len(preds))
+        out["self"] = {n: {k: float(s[k][i]) for k in ("l1", "ssim", "psnr", "ciede2000")} for i, n in enumerate(names)}
+    else:
+        out["self"] = None
+
+    # (c) the relit sky, against the target seen through the same camera at the output's exposure
+    out["sky"] = {}
+    dirs = _camera_directions(crop.K, h, w)
+    if crop.stratum != "no_sky":
+        for tgt in targets:
+            L_t = np.asarray(sh.rotate(tgt.sh(2), R))
+            k = _dc_luminance(source) / _dc_luminance(L_t)
+            target = torch.from_numpy(L_t * k).float()
+            t0 = time.perf_counter()
+            res = relighter.relight_full_resolution(lin, seg, target, source_lighting=torch.from_numpy(source).float(),
+                                                    method="proposed", decomposition=dec)
+            relit = res["relit"]
+            exact = _chw(crop.view_of(tgt.env) * k)
+            skies = {"skygan": relighter.paint_sky(relit, seg, res["working"], res["working_sky"], seed=seed),
+                     "sh_radiance": torch.where(seg, sh_radiance_image(L_t * k, dirs), relit),
+                     "keep": relit,
+                     "exact_view": torch.where(seg, exact, relit)}
+            seconds.setdefault("relight_and_skygan", time.perf_counter() - t0)
+            truth_disp = _display(exact)
+            out["sky"][tgt.name] = {
+                src: {"l1": float(metrics.l1(_display(img), truth_disp, true_sky)),
+                      "psnr": float(metrics.psnr(_display(img), truth_disp, true_sky))}
+                for src, img in skies.items()}
+    out["seconds"] = seconds
+    return out
+
+
+# ----------------------------------------------------------------------------- the run
+
+
+def run_real_bench(level: RealLevel, hdri_dir: str | Path | None, out_dir: str | Path, command: str,
+                   threads: int = 2, progress: Callable[[str], None] = print, weights: str | Path | None = None,
+                   seed: int = 0, fov_range: tuple[float, float] = (45.0, 75.0)) -> dict[str, Any]:
+    """Run ``bench --real`` at ``level`` and write ``real.md``, ``real.json``, ``charts/`` and ``panels/``.
+
+    Args:
+        hdri_dir: a folder of lat-long ``.exr``/``.hdr`` panoramas (scored as group ``"user"``,
+            masks by the procedure unless ``NAME_sky.png`` lies beside a map), or None: the
+            shipped panoramas (training side, studio apart, held-out sunrise).
+        weights: the learned methods' weights folder (None: the shipped ones).
+        seed: crops, photo noise and SkyGAN's noise.
+        fov_range: the crops' horizontal field of view range in degrees.
+
+    Returns:
+        real.json's content.
+    """
+    if threads < 1:
+        raise ValueError(f"threads must be >= 1, got {threads}")
+    from learned import Relighter
+    from synth.panorama_crops import folder_panoramas, make_crops, shipped_panoramas
+
+    from ..common import machine
+    from .real_report import write_real_report
+
+    t_start = time.perf_counter()
+    panoramas = folder_panoramas(hdri_dir) if hdri_dir is not None else shipped_panoramas()
+    relighter = Relighter.load(weights)
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    load_before = os.getloadavg()
+    try:
+        normals = sh.fibonacci_sphere(SPHERE_NORMALS)
+        target_pool = panoramas
+        if sum(p.outdoor for p in panoramas) < 2:  # one user map: relight it to the shipped outdoor ones
+            target_pool = panoramas + [p for p in shipped_panoramas() if p.group == "training"]
+        results: list[dict[str, Any]] = []
+        crops_by_pano: dict[str, list[Any]] = {}
+        for pano in panoramas:
+            t0 = time.perf_counter()
+            truth = np.asarray(envmap.irradiance_reference(pano.env.astype(np.float64), normals))
+            crops = make_crops(pano, level.crops, seed, fov_range=fov_range, samples=level.samples)
+            crops_by_pano[pano.name] = crops
+            for c in crops:
+                results.append(score_crop(relighter, c, _targets(pano, target_pool, level.targets, c.index), truth,
+                                          normals, seed))
+            progress(f"{pano.name} ({pano.group}): {len(crops)} crops scored in {time.perf_counter() - t0:.0f} s")
+        report = {
+            "format": "physrelight-bench-real", "version": 1, "command": command, "level": level.to_json(),
+            "seed": seed, "fov_range": list(fov_range),
+            "machine": {**machine(), "torch_threads": threads,
+                        "load_average_before": [round(x, 2) for x in load_before],
+                        "load_average_after": [round(x, 2) for x in os.getloadavg()],
+                        "shared": "the machine is shared with other jobs: timings are medians and indicative"},
+            "date": datetime.datetime.now().isoformat(timespec="seconds"),
+            "weights": "learned/weights" if weights is None else str(weights),
+            "panoramas": [{"name": p.name, "group": p.group, "mask": p.mask_source, "file": str(p.path),
+                           "size": list(p.env.shape[:2]), "sky_fraction": float(p.sky.mean())} for p in panoramas],
+            "crops": results,
+        }
+        report["seconds"] = round(time.perf_counter() - t_start, 1)
+        return write_real_report(out_dir, report, relighter, crops_by_pano, target_pool, level, progress)
+    finally:
+        torch.set_num_threads(before)
