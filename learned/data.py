@@ -25,8 +25,8 @@ nuisances put back at the training resolution (:func:`degrade_photo`: sensor noi
 quantisation, JPEG half the time, drawn as :func:`synth.photo.sample_photo_params` draws them),
 while every loss and the lighting solve read the clean photo. A photo area-downsampled from a
 higher-resolution set has half the native noise per halving and smoothed JPEG blocks; the held-out
-photos do not, and fine-tuning on such native photos directly cost lighting accuracy (docs/learned.md,
-the eleventh to thirteenth rules). Clean targets, degraded inputs.
+photos do not, and fine-tuning on such native photos directly cost lighting accuracy
+(docs/experiments/10-native-photos-e2-f-g.md, the eleventh to thirteenth rules). Clean targets, degraded inputs.
 """
 
 from __future__ import annotations
@@ -181,8 +181,9 @@ def pooled_mvs_normals(depth: torch.Tensor, K: torch.Tensor, res: int, stencil: 
     MVS runs on the full-size photos and the network on downsampled ones (the paper's setting):
     the simulator's holes are a fixed number of pixels wide and its noise is per pixel, so normals
     of the full-size depth, averaged over each training pixel, cover more of the foreground at the
-    accuracy of the low resolution than normals of the depth resized first (docs/learned.md,
-    "Would a higher resolution give more normal targets?").
+    accuracy of the low resolution than normals of the depth resized first
+    (docs/experiments/07-normal-upper-bound-and-mvs-coverage.md, "Would a higher resolution give
+    more normal targets?").
 
     Args:
         depth: ``(1, S, S)`` MVS-like z-depth (0 = missing) at the dataset's resolution ``S``.

@@ -122,9 +122,10 @@ class InverseNet(nn.Module):
             probable lighting in the subspace). Part of the network's identity: its outputs are
             trained for one of them.
         initial_shadow_logit: the shadow head's initial bias: ``s = sigmoid(.)`` starts there
-            (3: s = 0.95, almost no shadow; the shipped network). A start deep in the sigmoid's
-            flat end scales every gradient reaching ``s`` by ``sigmoid'`` (0.045 at 3), which the
-            held-out runs found to matter (docs/learned.md).
+            (3: s = 0.95, almost no shadow; the default; runs B and D, shipped, used 1). A start
+            deep in the sigmoid's flat end scales every gradient reaching ``s`` by ``sigmoid'``
+            (0.045 at 3), which the held-out runs found to matter
+            (docs/experiments/01-lighting-solve-and-shadow-start.md).
         mirror_average: at inference, decompose the photo and its left-right mirror image and
             average (:func:`mirror_averaged`; :func:`learned.objectives.decompose_and_solve`
             reads it). An inference choice like ``lighting_solve`` (chosen at export); training

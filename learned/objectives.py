@@ -55,7 +55,7 @@ class LossWeights:
     cross: float = 5.0
     prior: float = 1e-3
     shadow: float = 1e-2
-    normal_smooth: float = 0.0  # off in every shipped run; see edge_aware_smoothness
+    normal_smooth: float = 0.0  # off by default; runs B and D (shipped) used 2: see edge_aware_smoothness
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)

@@ -5,7 +5,7 @@ with the foreground, composited with the mask (Park et al. 2019, two classes: sk
 foreground). Beyond the paper the generator is also conditioned on the *target lighting*
 (order-2 radiance SH ``(B, 9, 3)`` in the camera frame), so the sky can follow the
 requested lighting; whether it does is measured by :func:`learned.train_sky.sky_follows_lighting`
-(``docs/learned.md``, "SkyGAN").
+(``docs/experiments/18-skygan.md``).
 
 Units. The lighting may come at any overall scale (photo units, decomposition units).
 Everything is divided by ``s = Y00 * lum(L00)``, the mean radiance over the sphere of the

@@ -109,7 +109,8 @@ def _chosen(argv: Sequence[str]) -> str | None:
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser with ``command``'s full subparser (its stage module imported) and the others listed only."""
-    parser = argparse.ArgumentParser(prog="physrelight", description="Single-image outdoor relighting, physics-checked.")
+    parser = argparse.ArgumentParser(prog="physrelight",
+                                     description="Single-image outdoor relighting, physics-checked.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, spec in SUBCOMMANDS.items():
         if name == command:

@@ -247,9 +247,10 @@ def solve_lighting_map(image: Array, albedo: Array, normals: Array, mask: Array,
     subspace (the paper's step) mixes their noise into the plausible ones; the MAP estimate
     fills them from the prior instead. With the true albedo, normals and sun visibility of the
     held-out synthetic photos, the error of the resulting shading on the photo's own normals
-    halves (``docs/learned.md``). ``noise -> 0`` gives the least-squares fit inside the
-    subspace; a large ``noise`` gives the prior's mean. Unlike :func:`solve_lighting` the result
-    is not scale-equivariant: the prior has units (it was fitted in photo units).
+    halves (``docs/experiments/01-lighting-solve-and-shadow-start.md``). ``noise -> 0`` gives
+    the least-squares fit inside the subspace; a large ``noise`` gives the prior's mean. Unlike
+    :func:`solve_lighting` the result is not scale-equivariant: the prior has units (it was
+    fitted in photo units).
 
     ``relative=True`` frees the scale: ``L = t (mean + C^T diag(scale) z)`` with ``t`` the
     least-squares level of the prior's mean lighting on this image (``t > 0``; floored at

@@ -1,4 +1,4 @@
-"""Quality vs network width vs inference time (the inverse network; docs/learned.md).
+"""Quality vs network width vs inference time (the inverse network; docs/experiments/16-width.md).
 
 For each width: train (or reuse) ``runs/width_W`` for ``--steps`` steps with the shipped
 run's settings, read its validation metrics at that step, and time ``Relighter``-style
@@ -7,7 +7,7 @@ with ``--time-threads`` torch threads. Runs already at ``--steps`` are reused; `
 trained elsewhere (e.g. the shipped width-12 run, read at the same step).
 
     .venv/bin/python scripts/learned_width_chart.py --data data/train --widths 4 8 16 \
-        --extra 12=runs/inverse_w12 --steps 1000 --out docs/learned_width
+        --extra 12=runs/inverse_w12 --steps 1000 --out docs/experiments/results/learned_width
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def main() -> None:
     ap.add_argument("--time-threads", type=int, default=2,
                     help="torch threads for the inference timing (2 = the 2-core machine; use 1 when it is shared: "
                          "two threads on two busy cores were 10-30x slower)")
-    ap.add_argument("--out", default="docs/learned_width")
+    ap.add_argument("--out", default="docs/experiments/results/learned_width")
     args = ap.parse_args()
 
     from learned.networks import InverseNet, count_parameters

@@ -1,4 +1,4 @@
-"""Which layer of a decomposition makes its Lambertian relighting better or worse (docs/learned.md)?
+"""Which layer of a decomposition makes its Lambertian relighting better or worse (docs/experiments/12-checkpoint-averaging-havg.md)?
 
 Two weights folders A and B decompose the same held-out photos; ``lambertian_sh`` (``albedo * shading(n;
 target)``, the target scaled into the decomposition's units by its own lighting's DC, ``Relighter.relight_linear``)
@@ -14,8 +14,8 @@ on the estimated normals) instead of the ratio of DC levels, i.e. the level the 
 with. Prints JSON: each variant's mean l1 / SSIM / PSNR / CIEDE2000, and each variant
 minus A, paired over the same cases, with the scene-bootstrap interval of ``evaluate-relight``.
 
-    .venv/bin/python scripts/relight_layer_swap_probe.py --data data/heldout12 --a learned/weights \
-        --b runs/pipeline_havg_w --json docs/relight_layer_swap_heldout12.json
+    .venv/bin/python docs/experiments/scripts/relight_layer_swap_probe.py --data data/heldout12 --a learned/weights \
+        --b runs/pipeline_havg_w --json docs/experiments/results/relight_layer_swap_heldout12.json
 """
 
 from __future__ import annotations

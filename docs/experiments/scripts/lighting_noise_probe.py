@@ -1,4 +1,4 @@
-"""How much should the lighting step trust the network's layers? (docs/learned.md, seventh rule's outcome)
+"""How much should the lighting step trust the network's layers? (docs/experiments/06-run-d.md)
 
 ``map_relative`` (:func:`physrelight.image_model.solve_lighting_map`, ``relative=True``) takes the image
 model's residual as Gaussian at ``noise`` times the image's rms, with ``noise = 1`` in the shipped step.
@@ -7,7 +7,7 @@ at that noise from an inverse network's own albedo, normals and shadow, and repo
 ``lighting_shading_err`` (the scale-invariant shading error against the true lighting on the true
 normals, as in ``train evaluate``); ``inf`` is the prior's mean shape at the fitted level. Prints JSON.
 
-    .venv/bin/python scripts/lighting_noise_probe.py --data data/train640 --split val --images 96
+    .venv/bin/python docs/experiments/scripts/lighting_noise_probe.py --data data/train640 --split val --images 96
 """
 
 from __future__ import annotations

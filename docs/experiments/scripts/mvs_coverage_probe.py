@@ -1,4 +1,4 @@
-"""How much of the foreground gets an MVS normal, and how good it is, at each rendering resolution (docs/learned.md).
+"""How much of the foreground gets an MVS normal, and how good it is, at each rendering resolution (docs/experiments/07-normal-upper-bound-and-mvs-coverage.md).
 
 For each synth dataset given (the same scenes rendered at different ``--res``), over all its photos: the share
 of foreground pixels (not sky, valid true normal) with MVS-like depth, the share with a central-difference MVS
@@ -11,8 +11,8 @@ With ``--pool-to N`` the MVS normals are computed at the dataset's resolution an
 renormalised mean of its valid sub-pixel normals, if at least half of them are valid), and are
 compared on N-px pixels with the true normals and sky resized as ``train evaluate`` resizes them (nearest).
 
-    .venv/bin/python scripts/mvs_coverage_probe.py data/res64_probe data/res128_probe data/res256_probe
-    .venv/bin/python scripts/mvs_coverage_probe.py --pool-to 64 data/res128_probe
+    .venv/bin/python docs/experiments/scripts/mvs_coverage_probe.py data/res64_probe data/res128_probe data/res256_probe
+    .venv/bin/python docs/experiments/scripts/mvs_coverage_probe.py --pool-to 64 data/res128_probe
 """
 
 from __future__ import annotations

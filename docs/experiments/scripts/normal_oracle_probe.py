@@ -1,4 +1,4 @@
-"""What can the inverse network's normals reach at all? A supervised upper bound (docs/learned.md).
+"""What can the inverse network's normals reach at all? A supervised upper bound (docs/experiments/07-normal-upper-bound-and-mvs-coverage.md).
 
 A diagnostic, **not a self-supervised result**: the inverse network's architecture
 (:class:`learned.networks.InverseNet`, the shipped UNet) is trained on the ground-truth normals of a
@@ -13,8 +13,8 @@ normals back; if it lands near it, a bigger network or a higher resolution is th
 (and writes it to ``--json``): held-out normal MAE and its breakdown at each ``--eval-every`` step, and the
 same on ``--train-images`` training photos (``train_`` prefixed: how well it fits what it saw).
 
-    .venv/bin/python scripts/normal_oracle_probe.py --data data/train640 --heldout data/heldout --width 12 \\
-        --steps 24000 --eval-every 4000 --threads 1 --json docs/learned_normal_oracle_w12.json
+    .venv/bin/python docs/experiments/scripts/normal_oracle_probe.py --data data/train640 --heldout data/heldout --width 12 \\
+        --steps 24000 --eval-every 4000 --threads 1 --json docs/experiments/results/learned_normal_oracle_w12.json
 """
 
 from __future__ import annotations

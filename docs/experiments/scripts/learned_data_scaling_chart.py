@@ -1,4 +1,4 @@
-"""Held-out quality of the inverse network vs the number of training scenes (docs/learned.md).
+"""Held-out quality of the inverse network vs the number of training scenes (docs/experiments/04-memorisation-and-data-scaling.md).
 
 For each ``SCENES=RUN`` or ``SCENES=RUN@STEP`` (a run of ``physrelight train inverse`` on a dataset
 of SCENES scenes), export the run's last checkpoint (or the one at STEP: a run that trains on past
@@ -12,9 +12,9 @@ shadow AP against the scene count, with the trivial baselines and the issue's go
 is rewritten atomically after each run; a run already in it at the same checkpoint step is not
 evaluated again (re-run to resume, or to add a run).
 
-    .venv/bin/python scripts/learned_data_scaling_chart.py --heldout data/heldout \
+    .venv/bin/python docs/experiments/scripts/learned_data_scaling_chart.py --heldout data/heldout \
         --runs 160=runs/inv_b_train160_mirror 640=runs/inv_a_train640_mirror \
-        1280=runs/inv_c_train1280_mirror --out docs/learned_data_scaling
+        1280=runs/inv_c_train1280_mirror --out docs/experiments/results/learned_data_scaling
 """
 
 from __future__ import annotations
