@@ -53,7 +53,8 @@ def test_02_the_ceilings_are_ceilings(quick) -> None:
         for iv in (sky["skygan"]["psnr"], light["proposed"]["shading_error"]):
             assert iv["lo"] <= iv["mean"] <= iv["hi"]
     crops = json.loads((quick / "real.json").read_text())["crops"]
-    assert all(c["self"] is None or c["self"]["identity"]["l1"] == 0.0 for c in crops)
+    assert all(c["self"] is None or (c["self"]["identity"]["l1"] == 0.0
+                                     and c["self"]["identity"]["psnr"] == pytest.approx(real.PSNR_CAP)) for c in crops)
     assert all(c["sky"] == {} for c in crops if c["stratum"] == "no_sky")
 
 

@@ -14,7 +14,8 @@ another panorama seen through the same camera is the exact relit sky. Per crop:
     (two crops of one panorama, their estimates turned into the world frame);
 (c) **the relit sky**: each crop relit to other panoramas (env-map targets); its sky pixels
     against the target seen through the same camera at the output's exposure, l1 and PSNR
-    in sRGB over the true sky; sky sources: SkyGAN (the pipeline's), the target's order-2
+    in sRGB over the true sky (every PSNR here capped at 8-bit quantisation, :data:`PSNR_CAP`);
+    sky sources: SkyGAN (the pipeline's), the target's order-2
     SH radiance, the photo's own sky kept, and the exact target view (the ceiling with the
     segmenter's mask);
 (d) **self-relighting**: the target is the crop's own panorama, so the output should be the
@@ -53,6 +54,9 @@ SELF_METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity")
 BOUNDARY_TOLERANCE = 2.0
 SPHERE_NORMALS = 256
 TOP_ROWS_FRACTION = 1.0 / 3.0
+PSNR_CAP = 10.0 * math.log10(12.0 * 255.0**2)
+"""58.9 dB: an 8-bit picture's own quantisation error (uniform, 1/255 wide); a PSNR above it means
+"exact to 8 bits", and capping it keeps means finite when a sky is rendered exactly."""
 
 
 @dataclass(frozen=True)
@@ -219,7 +223,8 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
     names.append("identity")
     if bool(fg.any()):
         s = score(preds, [photo_disp] * len(preds), [fg] * len(preds))
-        out["self"] = {n: {k: float(s[k][i]) for k in ("l1", "ssim", "psnr", "ciede2000")} for i, n in enumerate(names)}
+        out["self"] = {n: {k: float(min(s[k][i], PSNR_CAP) if k == "psnr" else s[k][i])
+                           for k in ("l1", "ssim", "psnr", "ciede2000")} for i, n in enumerate(names)}
     else:
         out["self"] = None
 
@@ -244,7 +249,7 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
             truth_disp = _display(exact)
             out["sky"][tgt.name] = {
                 src: {"l1": float(metrics.l1(_display(img), truth_disp, true_sky)),
-                      "psnr": float(metrics.psnr(_display(img), truth_disp, true_sky))}
+                      "psnr": min(float(metrics.psnr(_display(img), truth_disp, true_sky)), PSNR_CAP)}
                 for src, img in skies.items()}
     out["seconds"] = seconds
     return out
