@@ -2,8 +2,10 @@
 lighting solved and projected onto an outdoor subspace, ShadowNet; trained self-supervised.
 
 ``from learned import Relighter``: ``Relighter.load()`` uses the weights shipped in
-``learned/weights``. Modules: ``networks``, ``lighting`` (the prior), ``data``,
-``objectives``, ``evaluate``, ``checkpoint``, ``train``, ``relighter``, ``cli``.
+``learned/weights``. Modules, photo to relit photo: ``data``, ``networks``, ``lighting`` (the
+prior), ``objectives``, ``neural_renderer``, ``sky_segmentation``, ``sky_gan``, ``relighter``,
+``relight_cli``; training: ``runs`` (what the loops share), ``train``, ``train_renderer``,
+``train_sky``, ``checkpoint``, ``evaluate``, ``relight_eval``, ``cli`` (docs/learned.md).
 """
 
 from __future__ import annotations
