@@ -91,7 +91,7 @@ def _handler(args: argparse.Namespace) -> int:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``bench`` on the ``physrelight`` subcommand parser."""
-    from physrelight.cli import positive_int
+    from physrelight.cli_common import positive_int
 
     p = sub.add_parser("bench", help="relighting benchmark: methods x protocols x strata, speed vs accuracy",
                        description=DESCRIPTION + REAL_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -33,7 +33,6 @@ the target; its exact sky is the target's view times that same scale.
 from __future__ import annotations
 
 import datetime
-import math
 import os
 import time
 from dataclasses import dataclass
@@ -45,19 +44,12 @@ import torch
 
 from physrelight import colour, envmap, metrics, panorama, sh
 
-__all__ = ["REAL_LEVELS", "RealLevel", "brightness_sky", "run_real_bench", "shading_error", "top_rows_sky"]
+from .real_metrics import (BOUNDARY_TOLERANCE, ESTIMATES, PSNR_CAP, SEGMENTERS, SELF_METHODS, SKY_SOURCES,
+                           SPHERE_NORMALS, brightness_sky, dc_luminance, level_stops, shading_error, targets_for,
+                           top_rows_sky)
 
-SEGMENTERS = ("segmenter", "top_rows", "brightness")
-ESTIMATES = ("proposed", "prior_mean", "truth_order2")
-SKY_SOURCES = ("skygan", "sh_radiance", "keep", "exact_view")
-SELF_METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity")
-BOUNDARY_TOLERANCE = 2.0
-SPHERE_NORMALS = 256
-TOP_ROWS_FRACTION = 1.0 / 3.0
-PSNR_CAP = 10.0 * math.log10(12.0 * 255.0**2)
-"""58.9 dB: an 8-bit picture's own quantisation error (uniform, 1/255 wide); a PSNR above it means
-"exact to 8 bits", and capping it keeps means finite when a sky is rendered exactly."""
-
+__all__ = ["ESTIMATES", "PSNR_CAP", "REAL_LEVELS", "SEGMENTERS", "SELF_METHODS", "SKY_SOURCES", "RealLevel",
+           "brightness_sky", "level_stops", "run_real_bench", "score_crop", "shading_error", "top_rows_sky"]
 
 @dataclass(frozen=True)
 class RealLevel:
@@ -86,52 +78,6 @@ REAL_LEVELS = {"quick": RealLevel("quick", crops=4, targets=2, panels=1, bootstr
                "full": RealLevel("full", crops=16, targets=3, panels=4)}
 
 
-# ----------------------------------------------------------------------------- small pieces
-
-
-def shading_error(estimate: np.ndarray, truth: np.ndarray) -> float:
-    """Scale-invariant relative error ``min_a ||a E_hat - E|| / ||E||`` of ``(N, 3)`` irradiances.
-
-    One gain for all channels, so a wrong colour counts and a wrong level (the albedo-lighting
-    ambiguity, the camera's exposure) does not. 1 for an estimate that is all zero.
-    """
-    e, t = np.asarray(estimate, np.float64).ravel(), np.asarray(truth, np.float64).ravel()
-    den = float(e @ e)
-    a = float(e @ t) / den if den > 0 else 0.0
-    return float(np.linalg.norm(a * e - t) / max(np.linalg.norm(t), 1e-300))
-
-
-def _dc_luminance(coeffs: np.ndarray) -> float:
-    return float(np.asarray(coeffs)[0] @ np.asarray(colour.LUMINANCE))
-
-
-def level_stops(estimate: np.ndarray, truth: np.ndarray) -> float:
-    """``log2`` of the DC luminance of ``estimate`` over ``truth`` ``(9, 3)`` (clipped at +-10 stops)."""
-    num, den = _dc_luminance(estimate), _dc_luminance(truth)
-    if num <= 0:
-        return -10.0
-    return float(np.clip(math.log2(num / den), -10.0, 10.0))
-
-
-def top_rows_sky(height: int, width: int, fraction: float = TOP_ROWS_FRACTION) -> np.ndarray:
-    """Baseline sky: the top ``fraction`` of the rows (the horizon on the upper third line)."""
-    out = np.zeros((height, width), dtype=bool)
-    out[: int(round(fraction * height))] = True
-    return out
-
-
-def brightness_sky(display: np.ndarray) -> np.ndarray:
-    """Baseline sky: pixels whose luminance (display values) is above Otsu's threshold."""
-    y = np.asarray(display, np.float64) @ np.asarray(colour.LUMINANCE)
-    hist, edges = np.histogram(y, bins=256, range=(0.0, 1.0))
-    p = hist / max(hist.sum(), 1)
-    centres = 0.5 * (edges[:-1] + edges[1:])
-    w0 = np.cumsum(p)
-    m0 = np.cumsum(p * centres)
-    between = (m0[-1] * w0 - m0) ** 2 / np.maximum(w0 * (1.0 - w0), 1e-12)
-    return y > edges[int(np.argmax(between)) + 1]
-
-
 def _chw(x: np.ndarray) -> torch.Tensor:
     return torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32)).permute(2, 0, 1)[None]
 
@@ -153,14 +99,6 @@ def sh_radiance_image(coeffs: np.ndarray, directions: torch.Tensor) -> torch.Ten
 
 
 # ----------------------------------------------------------------------------- one crop
-
-
-def _targets(pano: Any, panoramas: Sequence[Any], n: int, index: int) -> list[Any]:
-    """``n`` outdoor target panoramas other than ``pano``, cycling with the crop's index."""
-    others = [p for p in panoramas if p.name != pano.name and p.outdoor]
-    if not others:
-        return []
-    return [others[(index + k) % len(others)] for k in range(min(n, len(others)))]
 
 
 def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradiance: np.ndarray,
@@ -234,7 +172,7 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
     if crop.stratum != "no_sky":
         for tgt in targets:
             L_t = np.asarray(sh.rotate(tgt.sh(2), R))
-            k = _dc_luminance(source) / _dc_luminance(L_t)
+            k = dc_luminance(source) / dc_luminance(L_t)
             target = torch.from_numpy(L_t * k).float()
             t0 = time.perf_counter()
             res = relighter.relight_full_resolution(lin, seg, target, source_lighting=torch.from_numpy(source).float(),
@@ -301,7 +239,7 @@ def run_real_bench(level: RealLevel, hdri_dir: str | Path | None, out_dir: str |
             crops = make_crops(pano, level.crops, seed, fov_range=fov_range, samples=level.samples)
             crops_by_pano[pano.name] = crops
             for c in crops:
-                results.append(score_crop(relighter, c, _targets(pano, target_pool, level.targets, c.index), truth,
+                results.append(score_crop(relighter, c, targets_for(pano, target_pool, level.targets, c.index), truth,
                                           normals, seed))
             progress(f"{pano.name} ({pano.group}): {len(crops)} crops scored in {time.perf_counter() - t0:.0f} s")
         report = {

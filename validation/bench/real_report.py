@@ -14,7 +14,7 @@ from physrelight import io, sh
 from physrelight.stats import hierarchical_bootstrap
 
 from ..common import jsonable, machine_line
-from .real import ESTIMATES, SEGMENTERS, SELF_METHODS, SKY_SOURCES, shading_error
+from .real_metrics import BOUNDARY_TOLERANCE, ESTIMATES, SEGMENTERS, SELF_METHODS, SKY_SOURCES, shading_error, targets_for
 
 GROUP_TITLES = {"heldout": "held out (sunrise)", "training": "training side (seen in training)",
                 "indoor": "indoor stress case (studio)", "user": "your panoramas"}
@@ -257,8 +257,6 @@ def write_panel(path: Path, relighter: Any, crop: Any, targets: Sequence[Any], s
 def write_real_report(out_dir: str | Path, report: dict[str, Any], relighter: Any, crops_by_pano: dict[str, list[Any]],
                       target_pool: Sequence[Any], level: Any, progress: Callable[[str], None] = print) -> dict[str, Any]:
     """Summarise ``report["crops"]`` per group, draw the chart and panels, write real.md and real.json."""
-    from .real import BOUNDARY_TOLERANCE, _targets
-
     out = Path(out_dir)
     (out / "panels").mkdir(parents=True, exist_ok=True)
     crops = report["crops"]
@@ -270,7 +268,7 @@ def write_real_report(out_dir: str | Path, report: dict[str, Any], relighter: An
     for name, cs in crops_by_pano.items():
         for c in cs[: level.panels]:
             rel = f"panels/{name}_{c.index}.png"
-            write_panel(out / rel, relighter, c, _targets(c.panorama, target_pool, 3, c.index))
+            write_panel(out / rel, relighter, c, targets_for(c.panorama, target_pool, 3, c.index))
             panels.append(rel)
     progress(f"{len(panels)} panels -> {out / 'panels'}")
     chart = _chart(out, report)
