@@ -187,3 +187,24 @@ def test_06_bad_arguments_fail_with_one_line(tmp_path, capsys) -> None:
     rc = cli(["bench", "--quick", "--weights", str(tmp_path / "nowhere"), "-o", str(tmp_path / "o"), "--quiet"])
     assert rc != 0
     assert "no weights folder" in capsys.readouterr().err
+
+
+# Today's quick-bench l1 (shipped weights of 2026-12-02 05:32 UTC, commit 8611da9; bench code of 2026-12-03),
+# bit-identical over two runs on one machine. A narrow band, not a bound: 0.0003 is ~300x the float noise
+# between machines and far below what a real change moves (feeding the renderer the source shadow took
+# proposed from 0.10862 to 0.1030). When the weights, the quick data or a method change on purpose,
+# regenerate these deliberately from a fresh `physrelight bench --quick --threads 1` and say so in the commit.
+QUICK_L1_PINS = {"proposed": 0.10862, "lambertian_sh": 0.11405, "shadownet_lambertian": 0.10794,
+                 "oracle_sh": 0.05557, "oracle_sh_shadow": 0.04682}
+QUICK_L1_BAND = 0.0003
+
+
+def test_07_quick_l1_figures_lie_in_a_narrow_band_around_their_pins(quick: Path) -> None:
+    """The quick bench's l1 of proposed, lambertian_sh, shadownet_lambertian and the two oracles is each
+    within +-0.0003 of its pin (issue 25: a renderer fed the wrong shadow moved proposed by 0.0056 and
+    nothing failed). The pins are regenerated deliberately when the weights change, never to quiet a
+    failure unexamined."""
+    m = json.loads((quick / "bench.json").read_text())["methods"]
+    off = {name: round(m[name]["l1"] - pin, 6) for name, pin in QUICK_L1_PINS.items()
+           if abs(m[name]["l1"] - pin) > QUICK_L1_BAND}
+    assert not off, f"quick l1 moved beyond +-{QUICK_L1_BAND} of its pin (now - pin): {off}"
