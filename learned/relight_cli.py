@@ -4,20 +4,33 @@ Examples::
 
     physrelight relight photo.jpg --env physrelight/data/hdri/forest.exr -o relit.png
     physrelight relight photo.jpg --env sky.hdr --azimuth 90 --mask sky.png --layers layers/ -o relit.png
-    physrelight relight photo.jpg --sun 25 120 --sky clear --sequence 24 -o day.gif
+    physrelight relight photo.jpg --sun 25 120 --sky overcast -o overcast.png
+    physrelight relight photo.jpg --sun 25 120 --sequence 24 -o day.gif
     physrelight relight photo.jpg --sh lighting.npy -o relit.png
+    physrelight relight photo.jpg --source-env on_set.exr --env target.exr -o relit.png
 
-The target lighting is given in the world frame (Y up) and the camera is assumed level,
-looking along world -Z (a single photo does not tell its orientation): ``--azimuth`` turns
-the target about the vertical axis, ``--sun ELEV AZIM`` puts the sun ELEV degrees above the
-horizon and AZIM degrees clockwise (seen from above) from straight ahead of the camera
-(0 = the sun behind the scene, facing the camera; 180 = the sun behind the camera).
+The target lighting is given in the world frame (Y up); the camera is level and looks along
+world -Z: ``--azimuth`` turns the target about the vertical axis, ``--sun ELEV AZIM`` puts the
+sun ELEV degrees above the horizon and AZIM degrees clockwise (seen from above) from straight
+ahead of the camera (0 = the sun behind the scene, facing the camera; 180 = behind the camera).
+The camera's horizontal field of view comes from the photo's EXIF focal length, else ``--fov``
+(default 60); its pitch from ``--pitch``, else from where the sky comes down to (the horizon).
 
-Any input size: the networks run at their resolution and the result is brought back to full
-resolution by ratio transfer (fine detail survives). The photo keeps its exposure; only
-the lighting's shape and colour change. The sky is found by the shipped segmenter (or
-``--mask``) and repainted by SkyGAN for the target lighting (``--keep-sky`` keeps it). ``--sequence N`` sweeps the azimuth over 360
-degrees in N frames and writes an animated GIF.
+The photo is relit at the networks' working resolution and brought back to full resolution
+along its own edges (fine detail survives). The default method, ``quotient``, multiplies the
+photo by the ratio of the target's shading to the photo's own: its albedo is never repainted.
+Without ``--source-env``/``--source-sh`` the photo's lighting is the decomposition's estimate;
+with them (the photo's own lighting, captured on set) it is that lighting, and relighting to
+it gives the photo back.
+
+The sky (white = sky in ``--mask``) is found by the shipped segmenter, kept only where it is a
+plausible sky; when there is none a one-line warning says why and only the foreground is
+relit. It is replaced by ``--sky-source``: ``target`` renders the target's own sky (an env map
+seen through the camera, or the sun's clear or overcast sky) in the foreground's exposure,
+``gan`` paints one with SkyGAN, ``keep`` keeps the photo's. ``--exposure auto`` (default)
+meters the relit photo as a camera would (the foreground to the photo's key, middle grey for
+a dark photo, never clipping the sky); ``keep`` keeps the camera's settings; a number adds
+stops to ``keep``. ``--sequence N`` sweeps the azimuth over 360 degrees in N frames (GIF).
 """
 
 from __future__ import annotations
@@ -62,22 +75,27 @@ def _read_sh(path: str) -> np.ndarray:
     return arr
 
 
-def _target(args: argparse.Namespace):
-    if args.env is not None:
-        p = Path(args.env)
+def _target(env: str | None, sh_path: str | None, sun: list[float] | None, what: str = "target"):
+    """The lighting named by one of ``--env`` / ``--sh`` / ``--sun`` (or their ``--source-`` twins)."""
+    if env is not None:
+        p = Path(env)
         if not p.is_file():
-            raise ValueError(f"environment map {args.env!r} does not exist")
+            raise ValueError(f"{what} environment map {env!r} does not exist")
         if p.suffix.lower() not in (".exr", ".hdr"):
-            raise ValueError(f"environment map {args.env!r} must be an .exr or .hdr file")
+            raise ValueError(f"{what} environment map {env!r} must be an .exr or .hdr file")
+        import torch
+
         from physrelight import envmap
 
-        env = envmap.read(p)
-        if env.ndim != 3 or env.shape[1] != 2 * env.shape[0]:
-            raise ValueError(f"environment map {args.env!r} must be lat-long (W = 2H), got {env.shape[:2]}")
-        return env
-    if args.sh is not None:
-        return _read_sh(args.sh)
-    return sun_direction(*args.sun)
+        try:
+            image = envmap.read(p)
+            envmap.check_envmap(torch.from_numpy(np.asarray(image, dtype=np.float32)), f"{what} environment map {env!r}")
+        except (OSError, RuntimeError) as err:
+            raise ValueError(f"cannot read {what} environment map {env!r}: {err}") from None
+        return image
+    if sh_path is not None:
+        return _read_sh(sh_path)
+    return sun_direction(*sun)
 
 
 def _write_gif(path: Path, frames: list[np.ndarray], fps: float) -> None:
@@ -90,51 +108,129 @@ def _write_gif(path: Path, frames: list[np.ndarray], fps: float) -> None:
         imgs[0].save(tmp, format="GIF", save_all=True, append_images=imgs[1:], duration=round(1000 / fps), loop=0)
 
 
+def _check_outputs(out: Path, layers: str | None) -> None:
+    """Refuse, before any work, outputs that cannot be written (so a failed run writes nothing)."""
+    import os
+
+    folders = [out.parent if str(out.parent) else Path(".")]
+    if out.is_dir():
+        raise ValueError(f"output {str(out)!r} is a folder, not a file")
+    if layers is not None:
+        d = Path(layers)
+        if d.exists() and not d.is_dir():
+            raise ValueError(f"--layers {layers!r} is a file, not a folder")
+        folders.append(d if d.exists() else d.parent if str(d.parent) else Path("."))
+    for f in folders:
+        if not f.is_dir():
+            raise ValueError(f"cannot write into {str(f)!r}: no such folder")
+        if not os.access(f, os.W_OK | os.X_OK):
+            raise ValueError(f"cannot write into {str(f)!r}: permission denied")
+
+
 def _relight(args: argparse.Namespace) -> int:
+    import sys
+    import warnings
+
     import torch
 
     from physrelight import io
+    from physrelight.exposure import parse_exposure
 
     torch.set_num_threads(args.threads)
     out = Path(args.output)
     want = ".gif" if args.sequence else ".png"
     if out.suffix.lower() != want:
         raise ValueError(f"output must be a {want} file{' with --sequence' if args.sequence else ''}, got {str(out)!r}")
-    photo = io.read_image(args.photo)  # one-line ValueError for missing, corrupt or grey-scale files
+    if args.sky is not None and args.sun is None:
+        raise ValueError("--sky chooses the sky of a --sun target; an --env or --sh target brings its own")
+    if args.source_env is not None or args.source_sh is not None:
+        if not args.method.startswith("quotient"):
+            raise ValueError("--source-env/--source-sh need a quotient method (--method quotient)")
+    exposure = parse_exposure(args.exposure)
+    _check_outputs(out, args.layers)
+    photo = io.read_photo(args.photo)  # one-line ValueError for missing, corrupt or grey-scale files
+    for note in photo.notes:
+        print(f"physrelight: note: {args.photo}: {note}", file=sys.stderr)
+    image = photo.image
     mask = None
     if args.mask is not None:
         mask = io.read_mask(args.mask)
-        if mask.shape != photo.shape[:2]:
+        if mask.shape != image.shape[:2]:
             raise ValueError(f"mask {args.mask!r} is {mask.shape[1]}x{mask.shape[0]}, the photo "
-                             f"{photo.shape[1]}x{photo.shape[0]}")
-    target = _target(args)
+                             f"{image.shape[1]}x{image.shape[0]}")
+        if mask.all() or not mask.any():
+            raise ValueError(f"mask {args.mask!r} marks {'every' if mask.all() else 'no'} pixel as sky "
+                             f"(white = sky, black = the scene)")
+    target = _target(args.env, args.sh, args.sun)
+    source = None
+    if args.source_env is not None or args.source_sh is not None:
+        source = _target(args.source_env, args.source_sh, None, what="source")
+    fov = args.fov if args.fov is not None else photo.fov_deg if photo.fov_deg is not None else None
 
-    from .relighter import Relighter
+    from .relighter import DEFAULT_FOV_DEG, Relighter
 
     relighter = Relighter.load(args.weights)
-    common = dict(sky_mask=mask, method=args.method, sky=args.sky, new_sky=not args.keep_sky, seed=args.seed)
+    common = dict(sky_mask=mask, method=args.method, sky=args.sky or "clear", new_sky=not args.keep_sky,
+                  seed=args.seed, sky_source=args.sky_source, exposure=exposure,
+                  fov_deg=fov if fov is not None else DEFAULT_FOV_DEG, pitch_deg=args.pitch, source=source)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        if args.sequence:
+            azimuths = args.azimuth + 360.0 * np.arange(args.sequence) / args.sequence
+            frames = relighter.relight_sequence(image, target, azimuths, progress=not args.quiet, **common)
+        else:
+            layers = relighter.relight_layers(image, target, azimuth_deg=args.azimuth, **common)
+    for w in {str(w.message) for w in caught if issubclass(w.category, UserWarning) and "NumPy array" not in str(w.message)}:
+        print(f"physrelight: warning: {w}", file=sys.stderr)
     if args.sequence:
-        azimuths = args.azimuth + 360.0 * np.arange(args.sequence) / args.sequence
-        frames = relighter.relight_sequence(photo, target, azimuths, progress=not args.quiet, **common)
         _write_gif(out, frames, args.fps)
         print(f"{len(frames)} frames -> {out}")
         return 0
-    layers = relighter.relight_layers(photo, target, azimuth_deg=args.azimuth, **common)
     io.write_png(out, layers["relit"])
     if args.layers is not None:
         d = Path(args.layers)
+        d.mkdir(exist_ok=True)
         for name, img in layers.items():
             io.write_png(d / f"{name}.png", img)
         print(f"layers ({', '.join(layers)}) -> {d}")
-    print(f"relit {photo.shape[1]}x{photo.shape[0]} -> {out}")
+    print(f"relit {image.shape[1]}x{image.shape[0]} -> {out}")
     return 0
+
+
+def _fov(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a field of view in degrees, got {text!r}") from None
+    if not (math.isfinite(v) and 1.0 <= v <= 179.0):
+        raise argparse.ArgumentTypeError(f"a field of view must lie in [1, 179] degrees, got {text}")
+    return v
+
+
+def _pitch(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a pitch in degrees, got {text!r}") from None
+    if not (math.isfinite(v) and -89.0 <= v <= 89.0):
+        raise argparse.ArgumentTypeError(f"a pitch must lie in [-89, 89] degrees, got {text}")
+    return v
+
+
+def _exposure(text: str) -> str | float:
+    from physrelight.exposure import parse_exposure
+
+    try:
+        return parse_exposure(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``relight``."""
     from physrelight.cli_common import positive_int, positive_number
 
-    from .relighter import RELIGHT_METHODS, SKY_TYPES
+    from .relighter import RELIGHT_METHODS, SKY_SOURCES, SKY_TYPES
 
     p = sub.add_parser("relight", help="relight one outdoor photo to a new lighting (shipped weights)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -144,18 +240,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     tgt.add_argument("--sh", help="target order-2 radiance SH, world frame: .npy, .json or text, shape (9, 3)")
     tgt.add_argument("--sun", nargs=2, type=float, metavar=("ELEV", "AZIM"),
                      help="target sun elevation and azimuth in degrees (see above), with --sky")
-    p.add_argument("--sky", choices=SKY_TYPES, default="clear", help="sky type for --sun (default: clear)")
+    p.add_argument("--sky", choices=SKY_TYPES, default=None, help="sky type for --sun (default: clear)")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--source-env", default=None, metavar="MAP",
+                     help="the photo's own environment map (known-source track: relighting to it gives the photo)")
+    src.add_argument("--source-sh", default=None, metavar="F", help="the photo's own order-2 radiance SH, world frame")
+    p.add_argument("--fov", type=_fov, default=None, metavar="DEG",
+                   help="horizontal field of view in degrees (default: from EXIF, else 60)")
+    p.add_argument("--pitch", type=_pitch, default=None, metavar="DEG",
+                   help="camera pitch in degrees, up positive (default: estimated from the sky's horizon)")
+    p.add_argument("--sky-source", choices=SKY_SOURCES, default=None,
+                   help="the relit sky: target (render the target's sky; default for --env/--sun), gan "
+                        "(SkyGAN; default for --sh), keep (the photo's)")
+    p.add_argument("--exposure", type=_exposure, default="auto",
+                   help="auto (meter like a camera; default), keep (same camera settings) or stops (e.g. -1)")
     p.add_argument("--azimuth", type=float, default=0.0, help="turn the target about the vertical (degrees)")
     p.add_argument("--mask", default=None, help="sky mask PNG (white = sky), the photo's size "
                                                 "(default: the shipped sky segmenter's)")
-    p.add_argument("--keep-sky", action="store_true", help="keep the photo's sky (default: SkyGAN paints a new one)")
+    p.add_argument("--keep-sky", action="store_true", help="keep the photo's sky (same as --sky-source keep)")
     p.add_argument("--seed", type=int, default=0, help="SkyGAN noise seed (default: 0)")
     p.add_argument("--layers", default=None, help="also write albedo, normals, shadows, shading, sky mask here")
     p.add_argument("--sequence", type=positive_int, default=None, metavar="N",
                    help="sweep the azimuth over 360 degrees in N frames; write an animated GIF")
     p.add_argument("--fps", type=positive_number, default=12.0, help="GIF frame rate (default: 12)")
-    p.add_argument("--method", choices=RELIGHT_METHODS, default="proposed",
-                   help="relighting method (default: proposed, the full pipeline)")
+    p.add_argument("--method", choices=RELIGHT_METHODS, default="quotient",
+                   help="relighting method (default: quotient; proposed is the paper's neural renderer)")
     p.add_argument("--weights", default=None, help="weights folder (default: the shipped ones)")
     p.add_argument("--threads", type=positive_int, default=2, help="torch CPU threads (default: 2)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -30,15 +30,23 @@ import torch
 
 from physrelight import colour, image_model, sh
 from physrelight.lighting_prior import LightingPrior
+from physrelight.quotient import quotient_relight
 
 from . import checkpoint as ckpt
 from .lighting import WEIGHTS_DIR, load_prior
-from .networks import InverseNet, ShadowNet
+from .networks import InverseNet, ShadowNet, repair_top_rows
 from .objectives import decompose_and_solve
 
-__all__ = ["RELIGHT_METHODS", "SKY_TYPES", "WEIGHT_FILES", "Relighter", "fill_weights_folder", "dc_luminance", "match_exposure", "rotate_azimuth",
-           "sun_lighting",
-           "transfer_to_full_resolution", "working_resolution"]
+__all__ = ["DEFAULT_FOV_DEG", "RELIGHT_METHODS", "SKY_SOURCES", "SKY_TYPES", "WEIGHT_FILES", "Relighter", "dc_luminance",
+           "estimate_pitch", "exposure_scale", "fill_weights_folder", "match_exposure", "rotate_azimuth", "sky_map_kind",
+           "sun_lighting", "sun_sky_map", "target_sky", "transfer_to_full_resolution", "working_resolution"]
+
+
+SUN_RADIUS_DEG = 0.27
+"""The sun's angular radius, for drawing its disc in a rendered sky."""
+DEFAULT_FOV_DEG = 60.0
+"""A photo's horizontal field of view when nothing says otherwise (no EXIF focal length, no ``--fov``)."""
+SKY_SOURCES = ("target", "gan", "keep")
 
 
 def _as_image(image: Any) -> tuple[torch.Tensor, str]:
@@ -180,8 +188,15 @@ class Relighter:
     @torch.no_grad()
     def decompose_linear(self, image: torch.Tensor, sky: torch.Tensor) -> dict[str, torch.Tensor]:
         """Tensors in, tensors out: ``image (B, 3, H, W)`` linear, ``sky (B, 1, H, W)`` bool ->
-        ``albedo, normals, shadow, lighting (B, 9, 3), lighting_solved, foreground``."""
-        return decompose_and_solve(self.inverse, image, sky, self.prior)
+        ``albedo, normals, shadow, lighting (B, 9, 3), lighting_solved, foreground``.
+
+        The layers' top two rows are repaired (:func:`learned.networks.repair_top_rows`: the band
+        along the top of every layer) after the lighting is solved, from the layers as the network
+        gives them: the shipped lighting step was trained with those rows as they are, and solving
+        on repaired rows costs the quick synthetic bench 0.0025 l1."""
+        out = decompose_and_solve(self.inverse, image, sky, self.prior)
+        out.update({k: repair_top_rows(out[k]) for k in ("albedo", "normals", "shadow")})
+        return out
 
     def sky_mask(self, image: torch.Tensor, sky_mask: Any = None) -> torch.Tensor:
         """``(B, 1, H, W)`` bool sky mask of linear ``image (B, 3, H, W)``: the given mask, else the
@@ -232,7 +247,8 @@ class Relighter:
     @torch.no_grad()
     def relight_linear(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
                        source_lighting: torch.Tensor | None = None, method: str = "proposed",
-                       decomposition: dict[str, torch.Tensor] | None = None) -> dict[str, torch.Tensor]:
+                       decomposition: dict[str, torch.Tensor] | None = None,
+                       known_source: bool = False) -> dict[str, torch.Tensor]:
         """Relight linear images to a camera-frame SH target; tensors in, tensors out.
 
         Args:
@@ -248,10 +264,18 @@ class Relighter:
                 takes the lighting prior's mean level instead.
             method: ``"proposed"`` (the neural renderer; ``"shadownet_lambertian"`` when no
                 renderer weights are loaded), ``"lambertian_sh"`` (``albedo * shading(n; target)``,
-                the InverseRenderNet-style baseline) or ``"shadownet_lambertian"`` (times
-                ShadowNet's shadow for the target).
+                the InverseRenderNet-style baseline), ``"shadownet_lambertian"`` (times
+                ShadowNet's shadow for the target), ``"quotient"`` (the photo times
+                ``shading(n; target) / shading(n; source)``, :mod:`physrelight.quotient`: the
+                albedo is never re-synthesised) or ``"quotient_shadownet"`` (the same with
+                ShadowNet's target shadow over the decomposition's source shadow).
             decomposition: :meth:`decompose_linear` of this very ``(image, sky)``, to relight one photo
                 to many targets without decomposing it again; None: decompose here.
+            known_source: the two lighting tracks of the quotient methods. False (*estimated*, the
+                paper's setting): the source shading is the decomposition's estimate, only its level
+                taken from ``source_lighting``. True (*known*): the source shading is
+                ``source_lighting`` itself (the photo's own environment map, measured on set), so a
+                target equal to it gives the photo back exactly. The other methods ignore it.
 
         Returns:
             ``relit (B, 3, H, W)`` linear, sky pixels equal to ``image``; ``target (B, 9, 3)`` in
@@ -279,12 +303,20 @@ class Relighter:
         tgt = batch_sh(target, "target")
         out = self.decompose_linear(image.float(), sky.bool()) if decomposition is None else decomposition
         source = None if source_lighting is None else batch_sh(source_lighting, "source_lighting")
-        tgt = match_exposure(tgt, out["lighting"], source, fallback=self.prior.mean.reshape(1, 9, 3))
-        if method == "lambertian_sh":
+        if known_source and source is None:
+            raise ValueError("known_source needs source_lighting: the photo's own lighting")
+        scale = exposure_scale(tgt, out["lighting"], source, fallback=self.prior.mean.reshape(1, 9, 3))[:, None, None]
+        tgt = tgt * scale
+        if method == "lambertian_sh" or method == "quotient":
             s = torch.ones_like(out["shadow"])
         else:
-            s = self.shadow_net(out["normals"], tgt)
-        if method == "proposed" and self.renderer is not None:
+            s = repair_top_rows(self.shadow_net(out["normals"], tgt))
+        if method in ("quotient", "quotient_shadownet"):
+            src = source * scale if known_source else out["lighting"]
+            src_shadow = out["shadow"] if method == "quotient_shadownet" else None
+            relit = quotient_relight(image.float(), out["normals"], src, tgt, mask=~sky, source_shadow=src_shadow,
+                                     target_shadow=s if method == "quotient_shadownet" else None)
+        elif method == "proposed" and self.renderer is not None:
             from .neural_renderer import render_relit
 
             relit = render_relit(self.renderer, image.float(), sky.bool(), out, tgt, s)
@@ -298,7 +330,8 @@ class Relighter:
     def relight_full_resolution(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
                                 source_lighting: torch.Tensor | None = None, method: str = "proposed",
                                 working_res: int | None = None,
-                                decomposition: dict[str, torch.Tensor] | None = None) -> dict[str, Any]:
+                                decomposition: dict[str, torch.Tensor] | None = None,
+                                known_source: bool = False) -> dict[str, Any]:
         """:meth:`relight_linear` at a working resolution, brought back to the image's size.
 
         The image is resized so its short side is ``working_res`` (None: the networks' ``res``;
@@ -307,7 +340,7 @@ class Relighter:
 
         Args:
             image: ``(B, 3, H, W)`` linear; sky ``(B, 1, H, W)`` bool; target, source_lighting,
-                method: as for :meth:`relight_linear`.
+                method, known_source: as for :meth:`relight_linear`.
             decomposition: the ``"working"`` dict of an earlier call on the same image and sky at the
                 same working resolution (its decomposition is reused), or None.
 
@@ -317,7 +350,7 @@ class Relighter:
         """
         small, small_sky = working_resolution(image, sky, self.res if working_res is None else working_res)
         out = self.relight_linear(small, small_sky, target, source_lighting=source_lighting, method=method,
-                                  decomposition=decomposition)
+                                  decomposition=decomposition, known_source=known_source)
         relit = torch.where(sky, image, transfer_to_full_resolution(image, small, out["relit"]))
         return {"relit": relit, "working": out, "working_sky": small_sky}
 
@@ -348,58 +381,90 @@ class Relighter:
 
     def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
                 method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
-                seed: int = 0) -> Any:
+                seed: int = 0, sky_source: str | None = None, exposure: str | float = "keep",
+                fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None, source: Any = None) -> Any:
         """Relight a photo of any size to a target lighting; the relit photo only.
 
         See :meth:`relight_layers` for the arguments; returns display values in [0, 1]
-        (sRGB), type and layout of ``image``.
+        (sRGB), type and layout of ``image`` (a batch is relit photo by photo).
         """
         lin, kind = _as_image(image)
-        layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky, new_sky,
-                                       seed, layers=False)
-        return _give_back(layers["relit"], kind)
+        frames = [self._relight_tensors(lin[b: b + 1], target, world_to_camera, sky_mask if lin.shape[0] == 1 else
+                                        (None if sky_mask is None else _as_mask(sky_mask, lin)[b: b + 1]),
+                                        method, azimuth_deg, sky, new_sky, seed, layers=False, sky_source=sky_source,
+                                        exposure=exposure, fov_deg=fov_deg, pitch_deg=pitch_deg,
+                                        source=source)["relit"]
+                  for b in range(lin.shape[0])]
+        return _give_back(torch.cat(frames), kind)
 
     def relight_sequence(self, image: Any, target: Any, azimuths_deg: Any, world_to_camera: Any = None,
                          sky_mask: Any = None, method: str = "proposed", sky: str = "clear", new_sky: bool = True,
-                         seed: int = 0, progress: bool = False) -> list[Any]:
+                         seed: int = 0, progress: bool = False, sky_source: str | None = None,
+                         exposure: str | float = "keep", fov_deg: float = DEFAULT_FOV_DEG,
+                         pitch_deg: float | None = None, source: Any = None) -> list[Any]:
         """:meth:`relight` for each azimuth of ``azimuths_deg`` (degrees, e.g. a turning sun), the photo
         segmented and decomposed once: the same frames as separate :meth:`relight` calls, cheaper.
         ``progress`` shows a progress bar."""
         from tqdm import tqdm
 
         lin, kind = _as_image(image)
+        if lin.shape[0] != 1:
+            raise ValueError(f"relight_sequence takes one image, got a batch of {lin.shape[0]}")
         reuse: dict[str, Any] = {}
         azimuths = np.asarray(azimuths_deg, dtype=np.float64).ravel()
         return [_give_back(self._relight_tensors(lin, target, world_to_camera, sky_mask, method, float(a), sky,
-                                                 new_sky, seed, layers=False, reuse=reuse)["relit"], kind)
+                                                 new_sky, seed, layers=False, reuse=reuse, sky_source=sky_source,
+                                                 exposure=exposure, fov_deg=fov_deg, pitch_deg=pitch_deg,
+                                                 source=source)["relit"],
+                           kind)
                 for a in tqdm(azimuths, desc="relight", disable=not progress)]
 
     def relight_layers(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
                        method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
-                       seed: int = 0) -> dict[str, np.ndarray]:
+                       seed: int = 0, sky_source: str | None = None, exposure: str | float = "keep",
+                       fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None,
+                       source: Any = None) -> dict[str, np.ndarray]:
         """Relight a photo of any size and give every layer at full resolution.
 
         The networks run at their training resolution (the short side resized to ``res``);
         the result comes back at full resolution by ratio transfer: the full-resolution
-        linear photo times the upsampled ratio ``relit / photo`` of the working resolution,
-        so fine detail the networks never saw survives (where the working photo is black
-        the upsampled relit image is used instead). The photo keeps its exposure: the
-        target's DC luminance is set to the estimated source lighting's, so only the
+        linear photo times the ratio ``relit / photo`` of the working resolution, upsampled
+        along the photo's edges (:func:`transfer_to_full_resolution`), so fine detail the networks
+        never saw survives (where the working photo is black the upsampled relit image is used
+        instead). The target's DC luminance is set to the estimated source lighting's, so only the
         lighting's shape and colour change (one photo does not tell the absolute light level;
-        :meth:`relight_linear` takes ``source_lighting`` for that).
+        :meth:`relight_linear` takes ``source_lighting`` for that); ``exposure`` then picks how the
+        result is shown (:mod:`physrelight.exposure`).
+
+        The sky: without ``sky_mask``, the shipped segmenter's, kept only where it is a plausible
+        sky (:func:`learned.sky_segmentation.sky_mask_full_resolution`); when it finds none a
+        ``UserWarning`` says why and only the foreground is relit. The sky is then replaced from
+        ``sky_source`` (:data:`SKY_SOURCES`; None: ``"target"`` for an env-map or sun target, else
+        ``"gan"`` when SkyGAN is shipped, else ``"keep"``): ``"target"`` looks the target itself up
+        through the photo's camera (:func:`target_sky`), in the relit foreground's units.
 
         Args:
             image: the photo (see the module doc); a single image.
             target: SH ``(9, 3)``, env map ``(H, 2H, 3)``, EXR path or sun direction ``(3,)``, world frame.
-            world_to_camera: ``(4, 4)`` or ``(3, 3)``; None = level camera (camera = world frame).
+            world_to_camera: ``(4, 4)`` or ``(3, 3)``; None = a level camera looking along world -Z
+                whose pitch is ``pitch_deg``.
             sky_mask: optional ``(H, W)`` bool, True on sky; None = the sky segmenter's mask
                 (when shipped; else no sky).
             method: see :meth:`relight_linear`.
-            new_sky: paint a sky for the target with SkyGAN (when shipped); False keeps the photo's.
+            new_sky: False keeps the photo's sky whatever ``sky_source`` says.
             seed: SkyGAN's noise (same seed, same sky).
             azimuth_deg: turn the target about the world's vertical axis first (degrees,
                 counter-clockwise seen from above).
             sky: sky type of a sun-direction target (:func:`sun_lighting`).
+            sky_source: ``"target"``, ``"gan"``, ``"keep"`` or None (see above).
+            exposure: ``"keep"`` (default here), ``"auto"`` or stops (:func:`physrelight.exposure.exposure_gain`).
+            fov_deg: the photo's horizontal field of view (its focal length, e.g. from EXIF).
+            pitch_deg: the level camera's pitch; None: estimated from the sky's horizon
+                (:func:`estimate_pitch`). Ignored when ``world_to_camera`` is given.
+            source: the photo's own lighting (SH, env map, path or sun direction, world frame, the
+                target's units), when known (a map captured on set): the *known-source* track of
+                :meth:`relight_linear` (quotient methods divide by it; relighting to it gives the
+                photo back). None: the decomposition's estimate.
 
         Returns:
             numpy ``(H, W, C)`` display values in [0, 1]: ``relit``, ``albedo``, ``normals``
@@ -410,27 +475,72 @@ class Relighter:
         if lin.shape[0] != 1:
             raise ValueError(f"relight_layers takes one image, got a batch of {lin.shape[0]}")
         layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky, new_sky,
-                                       seed)
+                                       seed, sky_source=sky_source, exposure=exposure, fov_deg=fov_deg,
+                                       pitch_deg=pitch_deg, source=source)
         return {k: v[0].permute(1, 2, 0).numpy() for k, v in layers.items()}
+
+    def photo_sky(self, lin: torch.Tensor, sky_mask: Any = None) -> tuple[torch.Tensor, str]:
+        """``(sky (1, 1, H, W) bool, reason)`` of one linear photo ``(1, 3, H, W)``: the given mask,
+        else the segmenter's plausible sky at full resolution (``reason`` says why there is none),
+        else no sky."""
+        if sky_mask is None and self.sky_segmenter is not None:
+            from .sky_segmentation import sky_mask_full_resolution
+
+            sky, reasons = sky_mask_full_resolution(self.sky_segmenter, lin)
+            return sky, reasons[0]
+        return _as_mask(sky_mask, lin), ""
 
     def _relight_tensors(self, lin: torch.Tensor, target: Any, world_to_camera: Any, sky_mask: Any, method: str,
                          azimuth_deg: float, sky_type: str, new_sky: bool = True, seed: int = 0,
-                         layers: bool = True, reuse: dict[str, Any] | None = None) -> dict[str, torch.Tensor]:
-        """The relit photo (``"relit"``) and, with ``layers``, every layer at full resolution.
+                         layers: bool = True, reuse: dict[str, Any] | None = None, sky_source: str | None = None,
+                         exposure: str | float = "keep", fov_deg: float = DEFAULT_FOV_DEG,
+                         pitch_deg: float | None = None, source: Any = None) -> dict[str, torch.Tensor]:
+        """The relit photo (``"relit"``) and, with ``layers``, every layer at full resolution, of one
+        photo ``lin (1, 3, H, W)``.
 
         ``reuse``, a dict this method fills on its first call for a photo and reads on later
-        ones: the sky mask and the working-resolution decomposition, which do not depend on
-        the target (:meth:`relight_sequence`)."""
+        ones: the sky mask, the camera and the working-resolution decomposition, which do not
+        depend on the target (:meth:`relight_sequence`)."""
+        import warnings
+
+        from physrelight import panorama
+        from physrelight.exposure import exposure_gain, parse_exposure
+
         if not math.isfinite(float(azimuth_deg)):
             raise ValueError(f"azimuth must be a finite number of degrees, got {azimuth_deg!r}")
+        if sky_source is not None and sky_source not in SKY_SOURCES:
+            raise ValueError(f"sky_source must be one of {SKY_SOURCES} or None, got {sky_source!r}")
+        parse_exposure(exposure)
         reuse = {} if reuse is None else reuse
+        if isinstance(target, (str, os.PathLike)):
+            from physrelight import envmap
+
+            target = envmap.read(target)
+        h, w = lin.shape[-2:]
         if "sky" not in reuse:
-            reuse["sky"] = self.sky_mask(lin, sky_mask)
+            reuse["sky"], why = self.photo_sky(lin, sky_mask)
+            if why:
+                warnings.warn(f"no sky relit: {why}; relighting the foreground only", UserWarning, stacklevel=3)
+            K = panorama.view_intrinsics(float(fov_deg), w, h)
+            if world_to_camera is not None:
+                T = world_to_camera
+            else:
+                pitch = estimate_pitch(reuse["sky"][0, 0], K) if pitch_deg is None else float(pitch_deg)
+                T = panorama.level_camera(0.0, pitch)
+            reuse["camera"] = (K, T)
         sky = reuse["sky"]
-        target_cam = self.target_lighting(rotate_azimuth(target, azimuth_deg) if azimuth_deg else target,
-                                          world_to_camera, sky_type).float()
-        full = self.relight_full_resolution(lin, sky, target_cam, method=method,
-                                            decomposition=reuse.get("decomposition"))
+        K, T = reuse["camera"]
+        target_cam = self.target_lighting(rotate_azimuth(target, azimuth_deg) if azimuth_deg else target, T,
+                                          sky_type).float()
+        source_cam = None
+        if source is not None:
+            if isinstance(source, (str, os.PathLike)):
+                from physrelight import envmap
+
+                source = envmap.read(source)
+            source_cam = self.target_lighting(source, T, sky_type).float()
+        full = self.relight_full_resolution(lin, sky, target_cam, method=method, source_lighting=source_cam,
+                                            decomposition=reuse.get("decomposition"), known_source=source is not None)
         if "decomposition" not in reuse:
             reuse["decomposition"] = {k: full["working"][k] for k in (
                 "albedo", "normals", "shadow", "lighting", "foreground")}
@@ -440,8 +550,17 @@ class Relighter:
         def up(x: torch.Tensor) -> torch.Tensor:
             return torch.nn.functional.interpolate(x, size=size, mode="bilinear", align_corners=False)
 
-        if new_sky:
-            relit = self.paint_sky(relit, sky, out, small_sky, seed=seed)
+        source = sky_source or ("target" if sky_map_kind(target) != "sh" else "gan" if self.sky_generator else "keep")
+        if new_sky and bool(sky.any()):
+            if source == "target":
+                # The target's own sky, in the relit foreground's units: the target was scaled by
+                # dc(out target) / dc(target) into the decomposition's (= the photo's linear) units.
+                k = float(dc_luminance(out["target"])[0] / dc_luminance(target_cam[None])[0])
+                radiance = target_sky(target, K, T, h, w, sky_type, azimuth_deg) * k
+                relit = torch.where(sky, radiance.permute(2, 0, 1)[None].to(relit.dtype), relit)
+            elif source == "gan":
+                relit = self.paint_sky(relit, sky, out, small_sky, seed=seed)
+        relit = relit * exposure_gain(exposure, relit, lin, ~sky, highlights=sky)[:, None, None, None]
 
         with torch.no_grad():
             result = {"relit": colour.to_ldr(relit.clamp_min(0))}
@@ -459,7 +578,7 @@ class Relighter:
             }
 
 
-RELIGHT_METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian")
+RELIGHT_METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "quotient", "quotient_shadownet")
 
 
 def dc_luminance(lighting: torch.Tensor) -> torch.Tensor:
@@ -468,16 +587,16 @@ def dc_luminance(lighting: torch.Tensor) -> torch.Tensor:
     return (lighting[:, 0] * lum).sum(-1)
 
 
-def match_exposure(target: torch.Tensor, estimated_source: torch.Tensor, given_source: torch.Tensor | None = None,
+def exposure_scale(target: torch.Tensor, estimated_source: torch.Tensor, given_source: torch.Tensor | None = None,
                    fallback: torch.Tensor | None = None) -> torch.Tensor:
-    """Scale ``target (B, 9, 3)`` into a decomposition's units.
+    """``(B,)`` the factor that brings ``target (B, 9, 3)`` into a decomposition's units.
 
     The decomposition's albedo and lighting share an unknown scale. With ``given_source``
-    ``(B, 9, 3)`` (the source lighting in the target's units) the target is scaled by
-    ``lum(DC estimated) / lum(DC given)``; without it, so that its DC luminance equals the
-    estimated source lighting's (the photo keeps its exposure). Where the estimate has no
-    positive level (below 1e-6 of ``fallback``'s, e.g. a photo without usable foreground),
-    ``fallback`` ``(1 or B, 9, 3)`` (the prior's mean) stands in for it.
+    ``(B, 9, 3)`` (the source lighting in the target's units) it is
+    ``lum(DC estimated) / lum(DC given)``; without it, ``lum(DC estimated) / lum(DC target)``,
+    so the scaled target's DC luminance equals the estimated source lighting's (the photo keeps
+    its exposure). Where the estimate has no positive level (below 1e-6 of ``fallback``'s, e.g. a
+    photo without usable foreground), ``fallback`` ``(1 or B, 9, 3)`` (the prior's mean) stands in.
 
     Raises:
         ValueError: the target (or the given source) has no positive DC luminance.
@@ -489,40 +608,139 @@ def match_exposure(target: torch.Tensor, estimated_source: torch.Tensor, given_s
     if fallback is not None:
         fb = dc_luminance(fallback.to(target.dtype)).expand_as(est)
         est = torch.where(est > 1e-6 * fb, est, fb)
-    return target * (est.clamp_min(0) / ref)[:, None, None]
+    return est.clamp_min(0) / ref
+
+
+def match_exposure(target: torch.Tensor, estimated_source: torch.Tensor, given_source: torch.Tensor | None = None,
+                   fallback: torch.Tensor | None = None) -> torch.Tensor:
+    """``target (B, 9, 3)`` times :func:`exposure_scale`: the target in a decomposition's units."""
+    return target * exposure_scale(target, estimated_source, given_source, fallback)[:, None, None]
+
+
 SKY_TYPES = ("clear", "overcast")
+
+
+def _sun_direction(direction: Any) -> np.ndarray:
+    d = np.asarray(direction, dtype=np.float64)
+    if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
+        raise ValueError(f"a sun direction must be a finite non-zero (3,) vector, got {d.tolist()}")
+    return d / np.linalg.norm(d)
+
+
+def sun_sky_map(sky: str = "clear", direction: Any = (0.0, 1.0, 0.0), height: int = 64) -> np.ndarray:
+    """``(height, 2 height, 3)`` the sky of :func:`sun_lighting` without its sun, world frame.
+
+    ``"clear"``: a clear sky, deep blue (0.30, 0.50, 1.0) at the zenith turning pale
+    (0.80, 0.88, 1.0) and twice as bright towards the horizon, with a white glow round the sun
+    (``2 max(0, d . s)^32``), scaled so its order-2 irradiance on a horizontal surface is 0.3
+    (green) against the sun's 1. ``"overcast"``: the grey CIE overcast sky
+    ``L(theta) = L_z (1 + 2 cos theta) / 3``, scaled to order-2 irradiance 1 on a horizontal
+    surface; ``direction`` is ignored. Both are dark below the horizon.
+    """
+    if sky not in SKY_TYPES:
+        raise ValueError(f"sky must be one of {SKY_TYPES}, got {sky!r}")
+    from physrelight import envmap
+
+    up = np.array([[0.0, 1.0, 0.0]])
+    d = envmap.directions(height, 2 * height)
+    cos_z = d[..., 1]
+    if sky == "overcast":
+        lum = np.where(cos_z > 0, (1.0 + 2.0 * np.clip(cos_z, 0, 1)) / 3.0, 0.0)
+        env = np.repeat(lum[..., None], 3, axis=-1)
+        return env / float(sh.irradiance(sh.project_envmap(env, order=2), up)[0, 1])
+    t = (1.0 - np.clip(cos_z, 0, 1))[..., None] ** 2  # 0 at the zenith, 1 at the horizon
+    colour_ = (1 - t) * np.array([0.30, 0.50, 1.0]) + t * np.array([0.80, 0.88, 1.0])
+    glow = 2.0 * np.maximum(0.0, d @ _sun_direction(direction))[..., None] ** 32
+    env = np.where(cos_z[..., None] > 0, colour_ * (1.0 + t) + glow, 0.0)
+    # Scale so the order-2 irradiance the image model sees on a horizontal surface is 0.3 in green.
+    return env * (0.3 / float(sh.irradiance(sh.project_envmap(env, order=2), up)[0, 1]))
 
 
 def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
     """Order-2 radiance SH ``(9, 3)`` (world frame) of a simple outdoor lighting.
 
-    ``"clear"``: a white delta sun of irradiance 1 towards ``direction`` plus a uniform
-    bluish sky (0.75, 0.9, 1.2) adding 0.3 (green) of order-2 irradiance on a horizontal
-    surface (soft fill light). ``"overcast"``: the CIE overcast sky
-    ``L(theta) = L_z (1 + 2 cos theta) / 3`` (zenith angle theta, dark below the horizon),
-    grey, no sun, scaled to order-2 irradiance 1 on a horizontal surface; the direction is
+    ``"clear"``: a white delta sun of irradiance 1 towards ``direction`` plus the clear sky of
+    :func:`sun_sky_map` (0.3 of order-2 irradiance on a horizontal surface: soft fill light).
+    ``"overcast"``: the CIE overcast sky of :func:`sun_sky_map`, no sun; the direction is
     ignored. Skies are projected from a 64 x 128 map.
     """
-    if sky not in SKY_TYPES:
-        raise ValueError(f"sky must be one of {SKY_TYPES}, got {sky!r}")
-    d = np.asarray(direction, dtype=np.float64)
-    if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
-        raise ValueError(f"a sun direction must be a finite non-zero (3,) vector, got {d.tolist()}")
-    from physrelight import envmap
-
-    dirs = envmap.directions(64, 128)
-    cos_z = dirs[..., 1]
+    d = _sun_direction(direction)
+    coeffs = np.asarray(sh.project_envmap(sun_sky_map(sky, d), order=2))
     if sky == "overcast":
-        lum = np.where(cos_z > 0, (1.0 + 2.0 * np.clip(cos_z, 0, 1)) / 3.0, 0.0)
-        env = np.repeat(lum[..., None], 3, axis=-1)
-        coeffs = sh.project_envmap(env, order=2)
-        return coeffs / float(sh.irradiance(coeffs, np.array([[0.0, 1.0, 0.0]]))[0, 1])
-    blue = np.array([0.75, 0.9, 1.2])
-    env = np.where(cos_z[..., None] > 0, blue, 0.0) * np.ones(3)
-    sky_coeffs = sh.project_envmap(env, order=2)
-    # Scale so the order-2 irradiance the image model sees on a horizontal surface is 0.3 in green.
-    sky_coeffs *= 0.3 / float(sh.irradiance(sky_coeffs, np.array([[0.0, 1.0, 0.0]]))[0, 1])
-    return sh.project_sun(d / np.linalg.norm(d), np.ones(3), order=2) + sky_coeffs
+        return coeffs
+    return sh.project_sun(d, np.ones(3), order=2) + coeffs
+
+
+
+def sky_map_kind(target: Any) -> str:
+    """``"env"`` (a lat-long map or its path), ``"sun"`` (a direction ``(3,)``) or ``"sh"``: whether a
+    target says what its sky looks like (the first two do; SH coefficients do not)."""
+    if isinstance(target, (str, os.PathLike)):
+        return "env"
+    shape = tuple(np.shape(target))
+    if shape == (3,):
+        return "sun"
+    if len(shape) == 3 and shape[-1] == 3 and shape[1] == 2 * shape[0]:
+        return "env"
+    return "sh"
+
+
+def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: int, sky: str = "clear",
+               azimuth_deg: float = 0.0) -> torch.Tensor:
+    """``(height, width, 3)`` the target's own sky as the photo's camera sees it (target units).
+
+    An env map is looked up through the pinhole camera (``K``, ``world_to_camera``) by
+    :func:`physrelight.panorama.view` (one ray per pixel: a photo's pixel is finer than a map's
+    texel); a sun target is :func:`sun_sky_map` plus the sun's disc (radius
+    :data:`SUN_RADIUS_DEG`, irradiance 1). ``azimuth_deg`` turns the target about +Y as
+    :func:`rotate_azimuth` does (the camera is turned the other way).
+
+    Raises:
+        ValueError: an SH target (it has no sky to render).
+    """
+    from physrelight import envmap, panorama, rotations
+
+    kind = sky_map_kind(target)
+    if kind == "sh":
+        raise ValueError("an SH target has no sky to render: use sky source 'gan' or 'keep'")
+    T = np.asarray(world_to_camera, dtype=np.float64)
+    R = T[:3, :3] @ rotations.about_y(float(azimuth_deg))  # target'(w) = target(R_y^T w)
+    if kind == "env":
+        env = envmap.read(target) if isinstance(target, (str, os.PathLike)) else np.asarray(target)
+        return torch.as_tensor(panorama.view(torch.as_tensor(env, dtype=torch.float32), K, R, height, width, 1))
+    env = torch.as_tensor(sun_sky_map(sky, target), dtype=torch.float32)
+    out = panorama.view(env, K, R, height, width, 1)
+    if sky == "clear":
+        d = torch.as_tensor(_sun_direction(target), dtype=torch.float64)
+        rays = panorama.camera_rays(K, R, height, width, 1)[..., 0, :]
+        r = math.radians(SUN_RADIUS_DEG)
+        disc = (rays @ d > math.cos(r)).to(out.dtype)
+        out = out + disc[..., None] / (math.pi * r * r)
+    return out
+
+
+def estimate_pitch(sky: torch.Tensor, K: Any, limits: tuple[float, float] = (-30.0, 45.0)) -> float:
+    """The pitch (degrees, up positive) of a level camera, from where its sky comes down to.
+
+    In each column whose top pixel is sky, the sky runs down from the top border to some row;
+    between buildings, trees and towers it comes down to the horizon, so the horizon is taken at
+    the 90th percentile of those rows, ``v_h``, and a level camera pitched up by ``p`` has its
+    horizon at ``v_h = c_y + f_y tan(p)``. Without sky at the top: 0 (a level camera).
+
+    Args:
+        sky: ``(H, W)`` bool. K: ``(3, 3)`` intrinsics of the photo.
+        limits: the estimate is clamped to this range.
+    """
+    if sky.ndim != 2:
+        raise ValueError(f"sky must have shape (H, W), got {tuple(sky.shape)}")
+    Kt = np.asarray(K, dtype=np.float64)
+    cols = sky[0]
+    if not bool(cols.any()):
+        return 0.0
+    run = torch.cumprod(sky[:, cols].to(torch.int64), dim=0).sum(0).double()  # sky rows from the top
+    v_h = float(torch.quantile(run, 0.9))
+    p = math.degrees(math.atan((v_h - Kt[1, 2]) / Kt[1, 1]))
+    return float(min(max(p, limits[0]), limits[1]))
 
 
 def rotate_azimuth(target: Any, degrees: float) -> Any:
@@ -557,12 +775,17 @@ def working_resolution(image: torch.Tensor, sky: torch.Tensor, res: int) -> tupl
 
 
 def transfer_to_full_resolution(full: torch.Tensor, small: torch.Tensor, relit_small: torch.Tensor,
-                                eps: float = 1e-3) -> torch.Tensor:
+                                eps: float = 1e-3, guided: bool = True) -> torch.Tensor:
     """Bring a working-resolution relighting back to ``full``'s size by ratio transfer.
 
     ``full (B, 3, H, W)`` linear photo, ``small``/``relit_small (B, 3, h, w)`` the working
     photo and its relighting. Returns ``full * up(relit_small / small)`` where the working
     photo is brighter than ``eps``, ``up(relit_small)`` elsewhere (a black pixel has no ratio).
+
+    ``up`` of the ratio is edge-aware when ``guided``: the log ratio is upsampled by the guided
+    filter on ``full``'s log luminance (:func:`physrelight.guided_filter.guided_upsample`), so a
+    ratio that changes at an object's edge changes at the photo's edge, not over a band of
+    working pixels (no halo); a constant ratio stays exactly constant. ``guided=False``: bilinear.
     """
     if full.shape[-2:] == small.shape[-2:]:
         return relit_small
@@ -573,4 +796,18 @@ def transfer_to_full_resolution(full: torch.Tensor, small: torch.Tensor, relit_s
 
     ratio = relit_small / small.clamp_min(eps)
     lit = up(small) > eps
-    return torch.where(lit, full * up(ratio), up(relit_small))
+    if guided:
+        from physrelight.guided_filter import guided_upsample
+
+        lum = (full.clamp_min(0) * full.new_tensor(colour.LUMINANCE)[None, :, None, None]).sum(1, keepdim=True)
+        log_ratio = guided_upsample(torch.log(lum.clamp_min(eps)), torch.log(ratio.clamp_min(1e-6)), eps=GUIDE_EPS)
+        ratio_up = torch.exp(log_ratio)
+    else:
+        ratio_up = up(ratio)
+    return torch.where(lit, full * ratio_up, up(relit_small))
+
+
+GUIDE_EPS = 0.05
+"""Ridge of the guided upsampling of the log ratio, in (log luminance)^2: where the photo's log luminance
+varies by well over sqrt(0.05) = 0.22 (a third of a stop) within a window, that edge is followed;
+flatter texture is smoothed over."""

@@ -27,7 +27,8 @@ from . import checkpoint as ckpt
 from .data import resize_short_side
 from .networks import UNet
 
-__all__ = ["SkySegmenter", "load_sky_segmenter", "photometric_augment", "segment_sky", "sky_probability"]
+__all__ = ["SEGMENT_RES", "SkySegmenter", "label_components", "load_sky_segmenter", "photometric_augment", "plausible_sky",
+           "refine_sky_boundary", "segment_sky", "sky_mask_full_resolution", "sky_probability"]
 
 _LUMA = colour.LUMINANCE
 
@@ -156,3 +157,173 @@ def photometric_augment(image: torch.Tensor, generator: torch.Generator) -> torc
         y = torch.round(y.clamp(0.0, 1.0) * 255.0) / 255.0
         out.append(colour.from_ldr(y[0]).to(image.dtype))
     return torch.stack(out)
+
+
+# ----------------------------------------------------------------------------- real photos: full-resolution mask
+
+
+SEGMENT_RES = 128
+"""Short side the segmenter runs at on a real photo: twice its training scale, so lattice towers and
+branches keep their shape; chosen on the training panoramas' crops (IoU +0.01 to +0.06 over 64 px)
+and scikit-image's rocket.jpg, never on the held-out panorama (docs/bench.md, "Real photos")."""
+COLOUR_MIN_BLUE_OVER_RED = 0.85
+SMOOTHNESS_MAX_RATIO = 0.5
+MIN_SKY_FRACTION = 0.01
+BAND_WORKING_PIXELS = 2
+"""How far (in working pixels) from the upsampled boundary pixels are decided by colour."""
+
+
+def label_components(mask: torch.Tensor) -> torch.Tensor:
+    """8-connected component labels of ``mask (H, W)`` bool: ``(H, W)`` int64, 0 off the mask, each
+    component's label its largest flat index + 1 (max-label propagation, a few hundred passes at 128 px)."""
+    if mask.ndim != 2:
+        raise ValueError(f"mask must have shape (H, W), got {tuple(mask.shape)}")
+    h, w = mask.shape
+    lab = torch.where(mask, torch.arange(1, h * w + 1, dtype=torch.float64).reshape(h, w), torch.zeros(h, w,
+                                                                                                   dtype=torch.float64))
+    m = mask.to(torch.float64)
+    for _ in range(h * w):
+        new = F.max_pool2d(lab[None, None], 3, stride=1, padding=1)[0, 0] * m
+        if torch.equal(new, lab):
+            break
+        lab = new
+    return lab.to(torch.int64)
+
+
+def _roughness(lum: torch.Tensor) -> torch.Tensor:
+    """``(H, W)`` std of log luminance over 3 x 3 pixels (border windows cut at the image)."""
+    ly = torch.log(lum.clamp_min(1e-4))[None, None]
+    m = F.avg_pool2d(ly, 3, 1, 1, count_include_pad=False)
+    m2 = F.avg_pool2d(ly * ly, 3, 1, 1, count_include_pad=False)
+    return (m2 - m * m).clamp_min(0).sqrt()[0, 0]
+
+
+def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor, str]:
+    """Keep the parts of a sky mask that are a sky, and say why when none is.
+
+    A sky component (8-connected, of ``mask (H, W)`` bool on linear ``image (3, H, W)``) is kept
+    when it touches the top border, or when it is as bright as the top-touching sky (median
+    luminance at least half of it) and as blue (blue/red at least 0.9 of it): sky between towers
+    or branches. The kept sky is then judged a sky when it covers at least 1 % of the photo, is
+    sky-coloured (median blue/red >= 0.85: blue, grey or white, not a warm wall, a face or a
+    cup) and smooth (median 3 x 3 roughness of log luminance at most half the foreground's).
+
+    Returns:
+        ``(kept (H, W) bool, reason)``; ``reason`` is ``""`` for a plausible sky, else one line
+        saying why there is none (then ``kept`` is all False).
+    """
+    lum = (image * image.new_tensor(_LUMA)[:, None, None]).sum(0)
+    lab = label_components(mask)
+    top = set(lab[0][lab[0] > 0].tolist())
+    if not top:
+        return torch.zeros_like(mask), "no sky region touches the top of the photo"
+    top_mask = torch.isin(lab, torch.tensor(sorted(top)))
+    ratio = image[2] / image[0].clamp_min(1e-4)
+    ref_lum, ref_ratio = float(lum[top_mask].median()), float(ratio[top_mask].median())
+    kept = top_mask.clone()
+    for c in torch.unique(lab[(lab > 0) & ~top_mask]).tolist():
+        sel = lab == c
+        if float(lum[sel].median()) >= 0.5 * ref_lum and float(ratio[sel].median()) >= 0.9 * ref_ratio:
+            kept |= sel
+    frac = float(kept.float().mean())
+    if frac < MIN_SKY_FRACTION:
+        return torch.zeros_like(mask), f"the sky found covers {100 * frac:.1f} % of the photo"
+    colour_ratio = float(ratio[kept].median())
+    if colour_ratio < COLOUR_MIN_BLUE_OVER_RED:
+        return torch.zeros_like(mask), (f"the region found at the top is not sky-coloured (blue/red {colour_ratio:.3f}, "
+                                        f"a sky has >= {COLOUR_MIN_BLUE_OVER_RED})")
+    rough = _roughness(lum)
+    fg = ~kept
+    if bool(fg.any()):
+        r_sky, r_fg = float(rough[kept].median()), float(rough[fg].median())
+        if r_sky > SMOOTHNESS_MAX_RATIO * r_fg:
+            return torch.zeros_like(mask), (f"the region found at the top is as textured as the rest "
+                                            f"(roughness {r_sky:.3f} vs {r_fg:.3f}): not a sky")
+    return kept, ""
+
+
+def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int = SEGMENT_RES,
+                             eps: float = 1e-2) -> tuple[torch.Tensor, list[str]]:
+    """The sky of real photos at full resolution, and a reason per photo when there is none.
+
+    The segmenter runs with its short side at ``res`` (:data:`SEGMENT_RES`); its mask keeps only a
+    plausible sky (:func:`plausible_sky`, at that resolution); the kept sky's probability is
+    brought to full size by the guided filter on the photo's log luminance
+    (:func:`physrelight.guided_filter.guided_upsample`), so the boundary follows the photo's
+    edges, and thresholded at 1/2.
+
+    Args:
+        image: ``(B, 3, H, W)`` linear photos.
+
+    Returns:
+        ``(sky (B, 1, H, W) bool, reasons)``: ``reasons[b]`` is ``""`` when photo ``b`` has a
+        plausible sky, else one line saying why not (its mask is then empty).
+    """
+    from physrelight.guided_filter import guided_upsample
+
+    _check_image(image)
+    param = next(model.parameters())
+    small = resize_short_side(image.to(param.dtype), res)
+    with torch.no_grad():
+        prob = torch.sigmoid(model(small))
+    masks, reasons = [], []
+    for b in range(image.shape[0]):
+        kept, why = plausible_sky(prob[b, 0] > 0.5, small[b])
+        reasons.append(why)
+        p = torch.where(kept, prob[b, 0], prob[b, 0].clamp(max=0.0))[None, None]
+        if not bool(kept.any()):
+            masks.append(torch.zeros(1, 1, *image.shape[-2:], dtype=torch.bool))
+            continue
+        lum = (image[b: b + 1] * image.new_tensor(_LUMA)[None, :, None, None]).sum(1, keepdim=True)
+        guide = torch.log(lum.clamp_min(1e-3)).to(p.dtype)
+        up = guided_upsample(guide, p.to(guide.dtype), eps=eps) > 0.5
+        band = max(1, BAND_WORKING_PIXELS * round(image.shape[-2] / small.shape[-2]))
+        masks.append(refine_sky_boundary(up, image[b: b + 1], band))
+    return torch.cat(masks), reasons
+
+
+def _dilate(mask: torch.Tensor, r: int) -> torch.Tensor:
+    return F.max_pool2d(mask.float(), 2 * r + 1, stride=1, padding=r) > 0.5
+
+
+def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int) -> torch.Tensor:
+    """Decide the pixels near a sky boundary by colour, at full resolution.
+
+    A mask brought up from a working resolution is right away from its boundary and wrong
+    within a band as wide as a working pixel or two: a lattice tower or a branch is thinner
+    than that. Within ``band`` pixels of the boundary each pixel goes to the side whose local
+    mean colour (log RGB, averaged over the sure pixels of that side within ``4 band``, or over
+    all of them where none is that near) it is nearer to; elsewhere the mask stays. A step edge
+    between two flat colours is kept exactly.
+
+    Args:
+        sky: ``(1, 1, H, W)`` bool. image: ``(1, 3, H, W)`` linear. band: pixels.
+
+    Returns:
+        ``(1, 1, H, W)`` bool.
+    """
+    from physrelight.guided_filter import box_filter
+
+    near = _dilate(sky, band) & _dilate(~sky, band)
+    if not bool(near.any()):
+        return sky
+    x = torch.log(image.clamp_min(1e-4))
+    sure_sky, sure_fg = (sky & ~near).to(x.dtype), (~sky & ~near).to(x.dtype)
+    r = 4 * band
+
+    def local_mean(w: torch.Tensor) -> tuple[torch.Tensor, bool]:
+        """Mean colour of the sure pixels ``w`` near each pixel; where none is near, of all of them."""
+        total = float(w.sum())
+        if total == 0:
+            return x, False
+        n = box_filter(w, r)
+        overall = (x * w).sum((2, 3), keepdim=True) / total
+        return torch.where(n > 0, box_filter(x * w, r) / n.clamp_min(1e-12), overall), True
+
+    mu_sky, has_sky = local_mean(sure_sky)
+    mu_fg, has_fg = local_mean(sure_fg)
+    if not (has_sky and has_fg):
+        return sky
+    d_sky = ((x - mu_sky) ** 2).sum(1, keepdim=True)
+    d_fg = ((x - mu_fg) ** 2).sum(1, keepdim=True)
+    return torch.where(near, d_sky < d_fg, sky)

@@ -9,9 +9,11 @@ folder and is renamed into place, so a killed process never leaves half a file.
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -179,8 +181,114 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     return arr.astype(np.float32) / 255.0
 
 
+@dataclass
+class Photo:
+    """A photo as a camera wrote it: display values, upright, and what its metadata says.
+
+    Attributes:
+        image: ``(H, W, 3)`` float32 display values in [0, 1] (sRGB-encoded), turned upright by
+            its EXIF orientation.
+        fov_deg: horizontal field of view from EXIF (:func:`exif_fov_deg`), or None.
+        alpha: ``(H, W)`` float32 alpha of an RGBA photo in [0, 1], or None.
+        notes: one line each about what was done to read it (turned upright, 16 bits taken at
+            8, alpha dropped).
+    """
+
+    image: np.ndarray
+    fov_deg: float | None = None
+    alpha: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+_EXIF_ORIENTATION, _EXIF_IFD = 0x0112, 0x8769
+_FOCAL_LENGTH, _FOCAL_35MM = 0x920A, 0xA405
+_FOCAL_PLANE_X_RES, _FOCAL_PLANE_UNIT = 0xA20E, 0xA210
+_UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}  # inch, cm, mm, micrometre
+_FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)
+
+
+def exif_fov_deg(exif: Any, width: int, height: int) -> float | None:
+    """The horizontal field of view (degrees) of an upright ``width x height`` photo from its EXIF.
+
+    From ``FocalLengthIn35mmFilm`` (the focal length a 36 x 24 mm frame would need for the same
+    *diagonal* angle: ``tan(d/2) = 43.27 / (2 f35)``, then the horizontal part of that diagonal),
+    else from ``FocalLength`` with the sensor width ``FocalPlaneXResolution`` implies. None when
+    neither is there or the values are not usable.
+    """
+    if exif is None:
+        return None
+    sub = exif.get_ifd(_EXIF_IFD) if hasattr(exif, "get_ifd") else {}
+    get = lambda tag: sub.get(tag, exif.get(tag))  # noqa: E731 - EXIF tags live in either IFD
+    try:
+        f35 = float(get(_FOCAL_35MM) or 0)
+        if f35 > 0:
+            half_diag = math.atan(_FULL_FRAME_DIAGONAL_MM / (2 * f35))
+            return math.degrees(2 * math.atan(math.tan(half_diag) * width / math.hypot(width, height)))
+        f = float(get(_FOCAL_LENGTH) or 0)
+        xres, unit = float(get(_FOCAL_PLANE_X_RES) or 0), int(get(_FOCAL_PLANE_UNIT) or 2)
+        if f > 0 and xres > 0 and unit in _UNIT_MM:
+            # FocalPlaneXResolution is per unit along the sensor's long side as recorded (landscape).
+            sensor_mm = max(width, height) / xres * _UNIT_MM[unit]
+            return math.degrees(2 * math.atan(sensor_mm * width / max(width, height) / (2 * f)))
+    except (TypeError, ValueError, ZeroDivisionError):
+        return None
+    return None
+
+
+def _png_bit_depth(path: Path) -> int:
+    """The bit depth in a PNG's header (PIL reads 16-bit RGB as 8-bit RGB without saying so)."""
+    with open(path, "rb") as f:
+        head = f.read(25)
+    return head[24] if len(head) == 25 and head[12:16] == b"IHDR" else 8
+
+
+def read_photo(path: str | os.PathLike) -> Photo:
+    """Read a PNG/JPEG photo upright, with its field of view, for relighting.
+
+    Turned by its EXIF orientation (a phone's portrait photo is stored sideways). 16-bit
+    photos are taken at 8 bits, RGBA photos give their alpha separately (a mask hint; the
+    colour is read as it is); each such step leaves a note. Grey-scale and palette images are
+    refused with a ``ValueError`` naming the mode.
+    """
+    from PIL import Image, ImageOps, UnidentifiedImageError
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"image {str(p)!r} does not exist")
+    notes: list[str] = []
+    try:
+        with Image.open(p) as im:
+            im.load()
+            exif = im.getexif()
+            if exif.get(_EXIF_ORIENTATION, 1) not in (1, None):
+                notes.append(f"turned upright by its EXIF orientation ({exif.get(_EXIF_ORIENTATION)})")
+            bits16 = im.mode.startswith("I;16") or (im.format == "PNG" and _png_bit_depth(p) == 16)
+            up = ImageOps.exif_transpose(im)
+            mode = up.mode
+            alpha = None
+            if mode in ("RGBA", "LA") or (mode == "P" and "transparency" in up.info):
+                if mode != "RGBA":
+                    raise ValueError(f"{str(p)!r} is a {mode!r} image; an RGB colour photo is needed")
+                alpha = np.asarray(up.getchannel("A"), dtype=np.float32) / 255.0
+                notes.append("its alpha channel is read apart (a mask hint), not as colour")
+                up = up.convert("RGB")
+            elif mode != "RGB":
+                raise ValueError(f"{str(p)!r} is a {mode!r} image; an RGB colour photo is needed")
+            if bits16:
+                notes.append("16-bit samples are taken at 8 bits")
+            arr = np.asarray(up)
+            width, height = up.size
+    except (UnidentifiedImageError, OSError) as err:
+        raise ValueError(f"cannot read {str(p)!r} as an image: {err}") from None
+    return Photo(arr.astype(np.float32) / 255.0, exif_fov_deg(exif, width, height), alpha, notes)
+
+
 def read_mask(path: str | os.PathLike) -> np.ndarray:
-    """Read a mask PNG (grey or RGB; any non-zero is on) as bool ``(H, W)``."""
+    """Read a mask PNG as bool ``(H, W)``: white (>= 128) is on, black off.
+
+    Single-channel (grey) or RGB with three equal channels; anything else (a colour photo given
+    as a mask) is refused with a ``ValueError``, as is an alpha channel that is not opaque.
+    """
     from PIL import Image, UnidentifiedImageError
 
     p = Path(path)
@@ -188,7 +296,16 @@ def read_mask(path: str | os.PathLike) -> np.ndarray:
         raise ValueError(f"mask {str(p)!r} does not exist")
     try:
         with Image.open(p) as im:
-            arr = np.asarray(im.convert("L"))
+            im.load()
+            if im.mode in ("L", "1", "I", "I;16", "P"):
+                arr = np.asarray(im.convert("L"))
+            elif im.mode in ("RGB", "RGBA", "LA"):
+                rgb = np.asarray(im.convert("RGB")).astype(np.int16)
+                if np.abs(rgb - rgb[..., :1]).max() > 2:  # JPEG noise is allowed, colour is not
+                    raise ValueError(f"mask {str(p)!r} is a colour image; a mask is grey-scale (white = sky)")
+                arr = rgb[..., 0]
+            else:
+                raise ValueError(f"mask {str(p)!r} is a {im.mode!r} image; a mask is grey-scale (white = sky)")
     except (UnidentifiedImageError, OSError) as err:
         raise ValueError(f"cannot read {str(p)!r} as an image: {err}") from None
     return arr >= 128

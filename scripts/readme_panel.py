@@ -1,39 +1,34 @@
-"""The README's real-photo panel: a photo, its decomposition and two relightings (shipped weights).
+"""The README's real-photo panel: real photos relit by `physrelight relight`'s defaults (shipped weights).
 
-    .venv/bin/python scripts/readme_panel.py [--photo PHOTO] [--out docs/images/relight_rocket.png]
+    .venv/bin/python scripts/readme_panel.py [--out docs/images/relight_rocket.png]
 
-Without ``--photo`` it uses scikit-image's ``rocket.jpg`` (a real dusk photo; the test extra
-installs scikit-image). Columns: photo | albedo | normals (camera frame, as RGB) | relit to the
-shipped forest HDRI | relit to a clear sky with the sun 10 degrees up (both with SkyGAN's sky).
+Rows: scikit-image's ``rocket.jpg`` (a real dusk photo; the test extra installs scikit-image) and
+three crops of the held-out panorama ``sunrise.exr`` (bench --real's crops 0, 5 and 10 of 16,
+seed 0), each as an 8-bit photo. Columns: input | relit to the shipped forest HDRI | to a low clear
+sun (10 degrees up, 60 to the right) | to an overcast sky. Every relighting is what the command line
+gives with its defaults (``--method quotient --exposure auto``, the target's own sky, the field of
+view 60 degrees for the rocket and the crop's own for the crops, the pitch estimated from the sky).
 No ground truth: for the eye. The machine and the seconds go to stdout.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-COLUMNS = ("photo", "albedo", "normals", "relit: forest HDRI", "relit: sun 10 deg, azimuth 60")
-
-
-def _photo(path: str | None) -> np.ndarray:
-    if path is not None:
-        from physrelight import io
-
-        return io.read_image(path)
-    from skimage import data
-
-    return data.rocket().astype(np.float32) / 255.0
+COLUMNS = ("input", "relit: forest HDRI", "relit: sun 10 deg up, 60 right", "relit: overcast")
+CROPS = (0, 5, 10)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--photo", default=None, help="RGB photo (default: scikit-image's rocket.jpg)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "images" / "relight_rocket.png"))
     args = ap.parse_args()
 
@@ -41,29 +36,48 @@ def main() -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from skimage import data
 
     from learned import Relighter
     from learned.relight_cli import sun_direction
-    from physrelight import io
+    from physrelight import envmap, io
+    from synth.panorama_crops import HELDOUT_DIR, load_panorama, make_crops
 
     t0 = time.perf_counter()
-    photo = _photo(args.photo)
     relighter = Relighter.load()
-    forest = relighter.relight_layers(photo, ROOT / "physrelight" / "data" / "hdri" / "forest.exr")
-    low_sun = relighter.relight(photo, sun_direction(10.0, 60.0))
-    tiles = [photo, forest["albedo"], forest["normals"], forest["relit"], low_sun]
-    fig, axes = plt.subplots(1, len(tiles), figsize=(2.6 * len(tiles), 2.6 * photo.shape[0] / photo.shape[1] + 0.5))
-    for ax, img, title in zip(axes, tiles, COLUMNS):
-        ax.imshow(np.clip(img, 0, 1))
-        ax.set_title(title, fontsize=8)
-        ax.set_xticks([])
-        ax.set_yticks([])
+    pano = load_panorama(HELDOUT_DIR / "sunrise.exr", "heldout")
+    crops = make_crops(pano, 16, seed=0)
+    inputs = [("rocket.jpg", data.rocket(), 60.0)] + [(f"sunrise crop {i}", crops[i].photo, crops[i].fov_deg)
+                                                      for i in CROPS]
+    forest = envmap.read(ROOT / "physrelight" / "data" / "hdri" / "forest.exr")
+    targets = [(forest, {}), (sun_direction(10.0, 60.0), {}), (sun_direction(45.0, 0.0), {"sky": "overcast"})]
+    rows = []
+    for name, photo, fov in inputs:
+        row = [photo.astype(np.float32) / 255.0]
+        for target, kw in targets:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)
+                row.append(relighter.relight(photo, target, method="quotient", exposure="auto", fov_deg=fov, **kw))
+        rows.append((name, row))
+    h = max(r[0].shape[0] / r[0].shape[1] for _, r in rows)
+    fig, axes = plt.subplots(len(rows), len(COLUMNS), figsize=(3.0 * len(COLUMNS), 3.0 * h * len(rows) + 0.6),
+                             squeeze=False)
+    for i, (name, row) in enumerate(rows):
+        for j, img in enumerate(row):
+            ax = axes[i, j]
+            ax.imshow(np.clip(img, 0, 1))
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title(COLUMNS[j], fontsize=9)
+            if j == 0:
+                ax.set_ylabel(name, fontsize=9)
     fig.tight_layout()
     with io.atomic_path(args.out, ".png") as tmp:
         fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)
     print(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s ({platform.processor() or platform.machine()}, "
-          f"{__import__('os').cpu_count()} cores)")
+          f"{os.cpu_count()} cores)")
 
 
 if __name__ == "__main__":

@@ -55,17 +55,18 @@ def test_02_relight_writes_full_resolution_output_and_layers(photo: Path, tmp_pa
     assert relit.shape == (52, 76, 3)
     names = {p.stem for p in (tmp_path / "L").glob("*.png")}
     assert {"relit", "albedo", "normals", "shadow", "target_shadow", "shading", "sky_mask"} <= names
-    # A user mask keeps those pixels exactly (the photo's sky is not relit).
+    # A user mask keeps those pixels exactly (the photo's sky is not relit) at the camera's own
+    # settings (--exposure keep: with auto the kept sky would follow the foreground's exposure).
     mask = np.zeros((52, 76), bool)
     mask[:12] = True
     io.write_png(tmp_path / "mask.png", mask.astype(np.float32))
     assert main(["relight", str(photo), "--sun", "20", "120", "--mask", str(tmp_path / "mask.png"), "--keep-sky",
-                 "--method", "lambertian_sh", "-o", str(out), "--threads", "1"]) == 0
+                 "--method", "lambertian_sh", "--exposure", "keep", "-o", str(out), "--threads", "1"]) == 0
     kept = io.read_image(out)
     np.testing.assert_array_equal(kept[:12], io.read_image(photo)[:12])
-    # A new sky (SkyGAN, when shipped) changes the sky only: the foreground is the same.
+    # A new sky (the sun's own, rendered) changes the sky only: the foreground is the same.
     assert main(["relight", str(photo), "--sun", "20", "120", "--mask", str(tmp_path / "mask.png"),
-                 "--method", "lambertian_sh", "-o", str(out), "--threads", "1"]) == 0
+                 "--method", "lambertian_sh", "--exposure", "keep", "-o", str(out), "--threads", "1"]) == 0
     painted = io.read_image(out)
     np.testing.assert_array_equal(painted[12:], kept[12:])
     from learned.lighting import WEIGHTS_DIR

@@ -42,6 +42,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
+from learned.relighter import estimate_pitch, target_sky
 from physrelight import colour, envmap, metrics, panorama, sh
 
 from .real_metrics import (BOUNDARY_TOLERANCE, ESTIMATES, PSNR_CAP, SEGMENTERS, SELF_METHODS, SKY_SOURCES,
@@ -74,6 +75,8 @@ class RealLevel:
         return dict(self.__dict__)
 
 
+SKY_FOREGROUND = "quotient"
+"""The foreground under the relit skies of (c): relight's default method."""
 REAL_LEVELS = {"quick": RealLevel("quick", crops=4, targets=2, panels=1, bootstrap=1000),
                "full": RealLevel("full", crops=16, targets=3, panels=4)}
 
@@ -115,14 +118,18 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
                            "camera": {"yaw_deg": crop.yaw_deg, "pitch_deg": crop.pitch_deg, "fov_deg": crop.fov_deg}}
     seconds: dict[str, float] = {}
 
-    # (a) sky segmentation
+    # (a) sky segmentation: relight's full-resolution mask, and the 64-px mask it replaced
     t0 = time.perf_counter()
-    seg = relighter.sky_mask(lin)
+    seg, why = relighter.photo_sky(lin)
     seconds["segmenter"] = time.perf_counter() - t0
-    masks = {"segmenter": seg[0, 0].numpy(), "top_rows": top_rows_sky(h, w), "brightness": brightness_sky(crop.display())}
+    masks = {"segmenter": seg[0, 0].numpy(), "segmenter_64px": relighter.sky_mask(lin)[0, 0].numpy(),
+             "top_rows": top_rows_sky(h, w), "brightness": brightness_sky(crop.display())}
     out["segmentation"] = {name: {"iou": metrics.mask_iou(m, crop.sky),
                                   "boundary_f": metrics.boundary_f(m, crop.sky, BOUNDARY_TOLERANCE),
                                   "sky_called": float(m.mean())} for name, m in masks.items()}
+    out["no_sky_reason"] = why
+    pitch = estimate_pitch(seg[0, 0], crop.K)
+    out["pitch"] = {"true_deg": crop.pitch_deg, "estimated_deg": pitch, "error_deg": pitch - crop.pitch_deg}
 
     # (b) lighting, from the decomposition the relighting uses (segmenter's mask: end to end)
     g = crop.gain
@@ -152,8 +159,9 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
     for m in SELF_METHODS[:-1]:
         t0 = time.perf_counter()
         relit = relighter.relight_full_resolution(lin, seg, torch.from_numpy(source).float(),
-                                                  source_lighting=torch.from_numpy(source).float(), method=m,
-                                                  decomposition=dec)["relit"]
+                                                  source_lighting=torch.from_numpy(source).float(),
+                                                  method=m.removesuffix("_known"), decomposition=dec,
+                                                  known_source=m.endswith("_known"))["relit"]
         seconds.setdefault(m, time.perf_counter() - t0)
         preds.append(torch.where(fg, _display(relit), photo_disp))
         names.append(m)
@@ -176,14 +184,19 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
             target = torch.from_numpy(L_t * k).float()
             t0 = time.perf_counter()
             res = relighter.relight_full_resolution(lin, seg, target, source_lighting=torch.from_numpy(source).float(),
-                                                    method="proposed", decomposition=dec)
+                                                    method=SKY_FOREGROUND, decomposition=dec)
             relit = res["relit"]
             exact = _chw(crop.view_of(tgt.env) * k)
-            skies = {"skygan": relighter.paint_sky(relit, seg, res["working"], res["working_sky"], seed=seed),
+            # relight's own sky: the target through the camera as relight has it (the crop's field of
+            # view, which its EXIF would give; the pitch estimated from the sky mask; the yaw given)
+            estimated = panorama.level_camera(crop.yaw_deg, pitch)
+            rendered = target_sky(tgt.env, crop.K, estimated, h, w) * k
+            skies = {"target": torch.where(seg, rendered.permute(2, 0, 1)[None].float(), relit),
+                     "skygan": relighter.paint_sky(relit, seg, res["working"], res["working_sky"], seed=seed),
                      "sh_radiance": torch.where(seg, sh_radiance_image(L_t * k, dirs), relit),
                      "keep": relit,
                      "exact_view": torch.where(seg, exact, relit)}
-            seconds.setdefault("relight_and_skygan", time.perf_counter() - t0)
+            seconds.setdefault("relight_and_skies", time.perf_counter() - t0)
             truth_disp = _display(exact)
             out["sky"][tgt.name] = {
                 src: {"l1": float(metrics.l1(_display(img), truth_disp, true_sky)),

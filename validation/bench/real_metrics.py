@@ -14,10 +14,10 @@ __all__ = ["BOUNDARY_TOLERANCE", "ESTIMATES", "PSNR_CAP", "SEGMENTERS", "SELF_ME
            "SPHERE_NORMALS", "TOP_ROWS_FRACTION", "brightness_sky", "dc_luminance", "level_stops", "shading_error",
            "targets_for", "top_rows_sky"]
 
-SEGMENTERS = ("segmenter", "top_rows", "brightness")
+SEGMENTERS = ("segmenter", "segmenter_64px", "top_rows", "brightness")
 ESTIMATES = ("proposed", "prior_mean", "truth_order2")
-SKY_SOURCES = ("skygan", "sh_radiance", "keep", "exact_view")
-SELF_METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity")
+SKY_SOURCES = ("target", "skygan", "sh_radiance", "keep", "exact_view")
+SELF_METHODS = ("quotient_known", "quotient", "proposed", "lambertian_sh", "shadownet_lambertian", "identity")
 BOUNDARY_TOLERANCE = 2.0
 SPHERE_NORMALS = 256
 TOP_ROWS_FRACTION = 1.0 / 3.0

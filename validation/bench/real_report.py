@@ -19,6 +19,8 @@ from .real_metrics import BOUNDARY_TOLERANCE, ESTIMATES, SEGMENTERS, SELF_METHOD
 GROUP_TITLES = {"heldout": "held out (sunrise)", "training": "training side (seen in training)",
                 "indoor": "indoor stress case (studio)", "user": "your panoramas"}
 PANEL_COLUMNS = 4
+RELIGHT_DEFAULTS = dict(method="quotient", exposure="auto")
+"""What `physrelight relight` passes by default that the Python API does not."""
 TRAINED = ("The training-side panoramas (city, courtyard, forest) are in the lighting prior's samples "
            "(`learned/lighting.py`) and in synth's HDRI lightings, so in the training renders of every shipped "
            "network (inverse network, ShadowNet, neural renderer, SkyGAN, sky segmenter): their figures are "
@@ -89,6 +91,10 @@ def summarise(crops: Sequence[dict[str, Any]], samples: int) -> dict[str, Any]:
                    for m in SELF_METHODS if m != "identity"}
     out["self_apart"] = {m: {k: iv(apart_self, lambda c, m=m, k=k: c["self"][m][k]) for k in ("l1", "psnr")}
                          for m in SELF_METHODS if m != "identity"}
+    out["pitch"] = {"abs_error_deg": iv(main, lambda c: abs(c["pitch"]["error_deg"])),
+                    "error_deg": iv(main, lambda c: c["pitch"]["error_deg"])}
+    out["declined"] = {"sky_crops": iv(main, lambda c: float(bool(c["no_sky_reason"]))),
+                       "no_sky_crops": iv(noskies, lambda c: float(bool(c["no_sky_reason"])))}
     secs: dict[str, list[float]] = {}
     for c in crops:
         for k, v in c["seconds"].items():
@@ -142,6 +148,14 @@ def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
     lines += _table(groups, s, SEGMENTERS, lambda g, r: g["segmentation"][r]["boundary_f"], "segmenter")
     lines += ["", "Fraction of the image called sky on crops without sky (0 is right):", ""]
     lines += _table(groups, s, SEGMENTERS, lambda g, r: g["segmentation"][r]["sky_called_without_sky"], "segmenter")
+    lines += ["", "`segmenter` is what `relight` uses: the segmenter at 128 px, kept where it is a plausible sky, "
+              "brought to full resolution along the photo's edges (`learned.sky_segmentation.sky_mask_full_resolution`); "
+              "`segmenter_64px` is the mask it replaced (64 px, bilinear). Fraction of crops where `relight` finds no "
+              "plausible sky and says so (on crops with sky / without):", ""]
+    lines += _table(groups, s, ("sky_crops", "no_sky_crops"), lambda g, r: g["declined"][r], "crops")
+    lines += ["", "Pitch estimated from the sky's horizon (`learned.relighter.estimate_pitch`), error in degrees "
+              "(absolute, then signed):", ""]
+    lines += _table(groups, s, ("abs_error_deg", "error_deg"), lambda g, r: g["pitch"][r], "pitch", 2)
     lines += ["", "## (b) Lighting from a real photo", "",
               "Scale-invariant irradiance error on the unit sphere (the estimate's order-2 irradiance, best single "
               "gain, against the panorama's exact irradiance; `truth_order2` is the ceiling of any order-2 "
@@ -160,16 +174,19 @@ def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
     lines += ["", "## (c) The relit sky", "",
               "Each crop relit to other panoramas; its sky against the target seen through the same camera at the "
               "output's exposure, over the true sky pixels (sRGB). Sky sources, all composited on the segmenter's "
-              "mask over the proposed foreground: `skygan` (what `relight` paints today), `sh_radiance` (the "
-              "target's order-2 SH radiance), `keep` (the photo's own sky), `exact_view` (the target looked up "
-              "through the true camera: the ceiling, limited only by the mask). `keep` is also every other "
-              "method's sky (identity's included).", "", "l1:", ""]
+              "mask over the `quotient` foreground: `target` (what `relight` renders: the target through the "
+              "camera it estimates, the crop's field of view as EXIF would give it and the pitch from the sky's "
+              "horizon), `skygan` (SkyGAN's sky), `sh_radiance` (the target's order-2 SH radiance), `keep` (the "
+              "photo's own sky: identity's and the synthetic methods'), `exact_view` (the target through the true "
+              "camera: the ceiling, limited only by the mask).", "", "l1:", ""]
     lines += _table(groups, s, SKY_SOURCES, lambda g, r: g["sky"][r]["l1"], "sky source")
     lines += ["", "PSNR (dB):", ""]
     lines += _table(groups, s, SKY_SOURCES, lambda g, r: g["sky"][r]["psnr"], "sky source", 2)
     lines += ["", "## (d) Self-relighting (target = the crop's own panorama; the output should be the input)", "",
               "Foreground (true non-sky) at full resolution, against the photo; identity is exact by construction. "
-              "l1:", ""]
+              "`quotient_known` is the known-source track (the quotient divides by the given source lighting: exact "
+              "by construction when the target is the source); every other method is on the estimated track "
+              "(the decomposition's lighting, its level from the given source). l1:", ""]
     names = [n for n in SELF_METHODS if n != "identity"]
     lines += _table(groups, s, names, lambda g, r: g["self"][r]["l1"], "method", 4)
     lines += ["", "SSIM:", ""]
@@ -236,11 +253,12 @@ def write_panel(path: Path, relighter: Any, crop: Any, targets: Sequence[Any], s
     tiles = [_label(crop.display(), "input")]
     layers = None
     for t in targets[:3]:
-        layers = relighter.relight_layers(crop.photo, t.env, world_to_camera=crop.world_to_camera, seed=seed)
+        layers = relighter.relight_layers(crop.photo, t.env, world_to_camera=crop.world_to_camera, seed=seed,
+                                          fov_deg=crop.fov_deg, **RELIGHT_DEFAULTS)
         tiles.append(_label(layers["relit"], f"-> {t.name}"))
     if layers is None:
         layers = relighter.relight_layers(crop.photo, np.asarray(crop.panorama.sh(2)), world_to_camera=crop.world_to_camera,
-                                          seed=seed)
+                                          seed=seed, fov_deg=crop.fov_deg, **RELIGHT_DEFAULTS)
     grey = lambda m: np.repeat(np.asarray(m, np.float32).reshape(*crop.size, 1), 3, axis=-1)  # noqa: E731
     tiles += [_label(grey(crop.sky), "true sky"), _label(grey(layers["sky_mask"][..., 0]), "segmenter"),
               _label(layers["albedo"], "albedo"), _label(layers["normals"], "normals"),

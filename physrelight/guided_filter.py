@@ -1,0 +1,97 @@
+"""Edge-aware smoothing and upsampling with the guided filter (He, Sun, Tang, ECCV 2010 / TPAMI 2013).
+
+The output is locally an affine function of a *guide* image, ``q = a I + b``, fitted to the
+input ``p`` over each ``(2r+1)^2`` window with ridge ``eps``: where the guide has an edge the
+output has it too, and where the guide is flat the output is a box-smoothed ``p``. Used to bring
+working-resolution quantities (a relighting ratio, a sky probability) to a photo's full
+resolution so that they follow its edges instead of the working grid (no blocky band, no halo).
+
+Shapes: ``guide (B, 1, H, W)`` (a grey guide; luminance or log luminance of a photo),
+``src (B, C, H, W)``; every channel of ``src`` is filtered with the one guide.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+
+__all__ = ["box_filter", "guided_filter", "guided_upsample"]
+
+
+def _check(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> None:
+    for name, x in (("guide", guide), ("src", src)):
+        if not isinstance(x, torch.Tensor) or x.ndim != 4:
+            got = tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
+            raise ValueError(f"{name} must be a (B, C, H, W) tensor, got {got}")
+    if guide.shape[1] != 1:
+        raise ValueError(f"guide must have one channel, got shape {tuple(guide.shape)}")
+    if guide.shape[0] != src.shape[0] or guide.shape[-2:] != src.shape[-2:]:
+        raise ValueError(f"guide {tuple(guide.shape)} and src {tuple(src.shape)} must share batch and size")
+    if isinstance(radius, bool) or not isinstance(radius, int) or radius < 1:
+        raise ValueError(f"radius must be a positive integer, got {radius!r}")
+    if not (math.isfinite(eps) and eps > 0):
+        raise ValueError(f"eps must be a positive number, got {eps!r}")
+
+
+def _window_sums(x: torch.Tensor, radius: int, dim: int) -> torch.Tensor:
+    """Sums of ``x`` over ``[i - r, i + r]`` along ``dim``, the window cut at the ends (cumulative sums: O(1) per pixel)."""
+    n = x.shape[dim]
+    c = torch.cumsum(x, dim=dim)
+    zero = torch.zeros_like(c.narrow(dim, 0, 1))
+    c = torch.cat([zero, c], dim=dim)  # c[k] = sum of the first k
+    idx = torch.arange(n, device=x.device)
+    hi = (idx + radius + 1).clamp(max=n)
+    lo = (idx - radius).clamp(min=0)
+    return c.index_select(dim, hi) - c.index_select(dim, lo)
+
+
+def box_filter(x: torch.Tensor, radius: int) -> torch.Tensor:
+    """Mean of ``x (B, C, H, W)`` over the ``(2r+1)^2`` window of each pixel, the window cut at the
+    border (the mean of the pixels inside the image, not of zero padding). Summed-area tables,
+    so the cost does not grow with ``radius``."""
+    h, w = x.shape[-2:]
+    ones = torch.ones(1, 1, h, w, dtype=x.dtype, device=x.device)
+    count = _window_sums(_window_sums(ones, radius, -2), radius, -1)
+    return _window_sums(_window_sums(x, radius, -2), radius, -1) / count
+
+
+def guided_filter(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> torch.Tensor:
+    """The guided filter of ``src (B, C, H, W)`` by ``guide (B, 1, H, W)`` (same size).
+
+    Args:
+        radius: window radius in pixels.
+        eps: ridge on the local slope ``a``: a guide variance well below ``eps`` (in the guide's
+            units squared) counts as flat and is smoothed over, one well above as an edge kept.
+
+    Returns:
+        ``(B, C, H, W)``. A constant ``src`` comes back unchanged, and so does one that is an
+        affine function of the guide.
+    """
+    _check(guide, src, radius, eps)
+    g = guide.to(src.dtype)
+    mean_i = box_filter(g, radius)
+    mean_p = box_filter(src, radius)
+    cov_ip = box_filter(g * src, radius) - mean_i * mean_p
+    var_i = box_filter(g * g, radius) - mean_i * mean_i
+    a = cov_ip / (var_i + eps)
+    b = mean_p - a * mean_i
+    return box_filter(a, radius) * g + box_filter(b, radius)
+
+
+def guided_upsample(guide: torch.Tensor, low: torch.Tensor, eps: float = 1e-3,
+                    radius: int | None = None) -> torch.Tensor:
+    """Bring ``low (B, C, h, w)`` to the size of ``guide (B, 1, H, W)`` following the guide's edges.
+
+    ``low`` is upsampled bilinearly, then guided-filtered by the full-resolution guide with a
+    window of about two low-resolution pixels (``radius`` default ``max(1, round(H / h))``): a
+    boundary that the working grid blurred over a band of ``H / h`` pixels snaps to the guide's
+    edge within a pixel or two.
+    """
+    if not isinstance(low, torch.Tensor) or low.ndim != 4:
+        raise ValueError(f"low must be a (B, C, h, w) tensor, got {getattr(low, 'shape', type(low).__name__)}")
+    size = guide.shape[-2:]
+    up = low if low.shape[-2:] == size else F.interpolate(low, size=size, mode="bilinear", align_corners=False)
+    r = radius if radius is not None else max(1, round(size[0] / max(low.shape[-2], 1)))
+    return guided_filter(guide, up, r, eps)

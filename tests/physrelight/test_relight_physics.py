@@ -1,0 +1,121 @@
+"""Specification of the physics pieces of the real-photo relight path: quotient relighting
+(:mod:`physrelight.quotient`), the guided filter (:mod:`physrelight.guided_filter`) and the output's
+exposure (:mod:`physrelight.exposure`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from physrelight import exposure, guided_filter, quotient, sh
+
+
+def _scene(seed: int = 0, h: int = 24, w: int = 32):
+    g = torch.Generator().manual_seed(seed)
+    n = torch.randn(1, 3, h, w, generator=g)
+    n[:, 2] = n[:, 2].abs() + 0.2  # facing the camera
+    n = n / n.norm(dim=1, keepdim=True)
+    albedo = torch.rand(1, 3, h, w, generator=g) * 0.8 + 0.1
+    L = torch.from_numpy(np.asarray(sh.project_sun(np.array([0.3, 0.6, 0.74]) / np.linalg.norm([0.3, 0.6, 0.74]),
+                                                   np.array([1.0, 0.9, 0.8])))).float()[None]
+    L[:, 0] += 0.6  # and a sky
+    return n, albedo, L
+
+
+def test_01_quotient_returns_the_photo_exactly_when_relit_to_its_own_lighting() -> None:
+    n, albedo, L = _scene()
+    photo = albedo * torch.rand_like(albedo)  # any photo: the quotient never looks at how it was made
+    assert torch.equal(quotient.quotient_relight(photo, n, L, L), photo)
+    s = torch.rand(1, 1, *photo.shape[-2:])
+    assert torch.equal(quotient.quotient_relight(photo, n, L, L, source_shadow=s, target_shadow=s), photo)
+
+
+def test_02_quotient_is_invariant_to_the_albedo_lighting_scale() -> None:
+    n, albedo, L = _scene(1)
+    Lt = torch.roll(L, 1, dims=2) * 1.3
+    photo = albedo * torch.clamp_min(sh.shading(L.double(), n.permute(0, 2, 3, 1).double()).permute(0, 3, 1, 2),
+                                     0).float()
+    a = quotient.quotient_relight(photo, n, L, Lt)
+    for k in (1e-3, 7.0):  # albedo / k and lighting * k make the same photo
+        torch.testing.assert_close(quotient.quotient_relight(photo, n, L * k, Lt * k), a, rtol=1e-5, atol=1e-7)
+
+
+def test_03_quotient_of_an_unguarded_lambertian_photo_is_the_target_rendering() -> None:
+    n, albedo, L = _scene(2)
+    Lt = L.clone()
+    Lt[:, 1:4] *= -1  # the light from the other side
+    from physrelight import image_model
+
+    photo = image_model.render(albedo, n, L)
+    want = image_model.render(albedo, n, Lt).clamp_min(0)
+    got = quotient.quotient_relight(photo, n, L, Lt, guard=1e-9)
+    lit = image_model.shading(n, L).min(1, keepdim=True).values > 0.05
+    torch.testing.assert_close(got[lit.expand_as(got)], want[lit.expand_as(want)], rtol=1e-4, atol=1e-6)
+
+
+def test_04_guided_filter_keeps_constants_and_affine_functions_of_the_guide() -> None:
+    g = torch.Generator().manual_seed(3)
+    guide = torch.rand(1, 1, 30, 40, generator=g)
+    const = torch.full((1, 2, 30, 40), 0.7)
+    torch.testing.assert_close(guided_filter.guided_filter(guide, const, 3, 1e-3), const)
+    affine = 2.0 * guide - 0.5
+    torch.testing.assert_close(guided_filter.guided_filter(guide, affine, 3, 1e-8), affine, rtol=1e-3, atol=1e-3)
+    box = guided_filter.box_filter(guide.double(), 2)
+    brute = torch.stack([guide.double()[0, 0, max(0, i - 2): i + 3, max(0, j - 2): j + 3].mean()
+                         for i in range(30) for j in range(40)]).reshape(30, 40)
+    torch.testing.assert_close(box[0, 0], brute)
+
+
+def test_05_guided_upsampling_keeps_a_step_edge_within_one_pixel() -> None:
+    """A mask brought up 8x from a working resolution, guided by the full-resolution photo's step:
+    its 1/2 crossing lands within a pixel of the photo's edge."""
+    H, W, edge = 64, 96, 37  # the edge is not on the coarse grid
+    guide = torch.zeros(1, 1, H, W)
+    guide[..., edge:] = 1.0
+    full_mask = (torch.arange(W) < edge).float().expand(1, 1, H, W)
+    low = torch.nn.functional.interpolate(full_mask, size=(H // 8, W // 8), mode="area")
+    up = guided_filter.guided_upsample(guide, low, eps=1e-3)
+    col = (up[0, 0, H // 2] > 0.5).float()
+    found = int(col.sum())  # the mask is 1 left of its edge
+    assert abs(found - edge) <= 1, (found, edge)
+    assert bool((col[:found] == 1).all())  # one crossing: a step, not a ripple
+
+
+def test_06_auto_exposure_brings_the_foreground_to_the_sources_key() -> None:
+    g = torch.Generator().manual_seed(4)
+    source = torch.rand(1, 3, 20, 30, generator=g) * 0.5 + 0.05
+    relit = source * 3.7
+    fg = torch.ones(1, 1, 20, 30, dtype=torch.bool)
+    fg[..., :4, :] = False
+    gain = exposure.exposure_gain("auto", relit, source, fg)
+    key = exposure.log_average(source, fg)
+    assert key > exposure.DARK_KEY
+    torch.testing.assert_close(exposure.log_average(relit * gain[:, None, None, None], fg), key)
+    dark = source * 0.01  # a dark photo: the relit one goes to middle grey
+    gain = exposure.exposure_gain("auto", relit, dark, fg)
+    torch.testing.assert_close(exposure.log_average(relit * gain[:, None, None, None], fg),
+                               torch.tensor([exposure.MIDDLE_GREY]))
+    # keep and stops
+    assert float(exposure.exposure_gain("keep", relit, source, fg)) == 1.0
+    assert float(exposure.exposure_gain(-2, relit, source, fg)) == 0.25
+
+
+def test_07_auto_exposure_does_not_clip_the_sky() -> None:
+    source = torch.full((1, 3, 10, 10), 0.02)  # dark: auto aims at middle grey
+    relit = source.clone()
+    sky = torch.zeros(1, 1, 10, 10, dtype=torch.bool)
+    sky[..., :3, :] = True
+    relit[:, :, :3] = 0.5  # a bright sky over a dark scene
+    gain = float(exposure.exposure_gain("auto", relit, source, ~sky, highlights=sky))
+    assert math.isclose(gain, 2.0, rel_tol=1e-5)  # 0.5 * gain = 1: white, not beyond
+    assert float(exposure.exposure_gain("auto", relit, source, ~sky)) > 8
+
+
+@pytest.mark.parametrize("bad", ["bright", "nan", "1e9", ""])
+def test_08_exposure_values_are_checked(bad) -> None:
+    with pytest.raises(ValueError, match="exposure"):
+        exposure.parse_exposure(bad)
+    assert exposure.parse_exposure(" AUTO ") == "auto" and exposure.parse_exposure("+1.5") == 1.5
