@@ -47,6 +47,8 @@ SUN_RADIUS_DEG = 0.27
 DEFAULT_FOV_DEG = 60.0
 """A photo's horizontal field of view when nothing says otherwise (no EXIF focal length, no ``--fov``)."""
 SKY_SOURCES = ("target", "gan", "keep")
+HORIZON_Y = 0.02
+"""A sun target's sky is looked up no lower than this (the sine of about 1 degree of elevation)."""
 
 
 def _as_image(image: Any) -> tuple[torch.Tensor, str]:
@@ -709,10 +711,16 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
         env = envmap.read(target) if isinstance(target, (str, os.PathLike)) else np.asarray(target)
         return torch.as_tensor(panorama.view(torch.as_tensor(env, dtype=torch.float32), K, R, height, width, 1))
     env = torch.as_tensor(sun_sky_map(sky, target), dtype=torch.float32)
-    out = panorama.view(env, K, R, height, width, 1)
+    rays = panorama.camera_rays(K, R, height, width, 1)
+    # This sky has no ground: a "sky" pixel below the horizon (a mask or a pitch a little off) shows
+    # the sky just above the horizon rather than black.
+    low = rays[..., 1] < HORIZON_Y
+    rays = torch.where(low[..., None], torch.nn.functional.normalize(
+        torch.cat([rays[..., :1], torch.full_like(rays[..., 1:2], HORIZON_Y), rays[..., 2:]], -1), dim=-1), rays)
+    out = panorama.look_up(env, rays)
     if sky == "clear":
         d = torch.as_tensor(_sun_direction(target), dtype=torch.float64)
-        rays = panorama.camera_rays(K, R, height, width, 1)[..., 0, :]
+        rays = rays[..., 0, :]
         r = math.radians(SUN_RADIUS_DEG)
         disc = (rays @ d > math.cos(r)).to(out.dtype)
         out = out + disc[..., None] / (math.pi * r * r)

@@ -250,15 +250,18 @@ def _label(tile: np.ndarray, text: str) -> np.ndarray:
 def write_panel(path: Path, relighter: Any, crop: Any, targets: Sequence[Any], seed: int = 0) -> None:
     """input | relit to each target (``relight_layers``: the user's path, with the true camera) |
     true sky | segmenter's sky | albedo | normals | shadow, four tiles a row, each at 2x."""
+    import warnings
+
     tiles = [_label(crop.display(), "input")]
     layers = None
-    for t in targets[:3]:
-        layers = relighter.relight_layers(crop.photo, t.env, world_to_camera=crop.world_to_camera, seed=seed,
-                                          fov_deg=crop.fov_deg, **RELIGHT_DEFAULTS)
-        tiles.append(_label(layers["relit"], f"-> {t.name}"))
-    if layers is None:
-        layers = relighter.relight_layers(crop.photo, np.asarray(crop.panorama.sh(2)), world_to_camera=crop.world_to_camera,
-                                          seed=seed, fov_deg=crop.fov_deg, **RELIGHT_DEFAULTS)
+    kw = dict(world_to_camera=crop.world_to_camera, seed=seed, fov_deg=crop.fov_deg, **RELIGHT_DEFAULTS)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="no sky relit", category=UserWarning)  # counted in (a) instead
+        for t in targets[:3]:
+            layers = relighter.relight_layers(crop.photo, t.env, **kw)
+            tiles.append(_label(layers["relit"], f"-> {t.name}"))
+        if layers is None:
+            layers = relighter.relight_layers(crop.photo, np.asarray(crop.panorama.sh(2)), **kw)
     grey = lambda m: np.repeat(np.asarray(m, np.float32).reshape(*crop.size, 1), 3, axis=-1)  # noqa: E731
     tiles += [_label(grey(crop.sky), "true sky"), _label(grey(layers["sky_mask"][..., 0]), "segmenter"),
               _label(layers["albedo"], "albedo"), _label(layers["normals"], "normals"),
