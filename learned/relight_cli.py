@@ -197,26 +197,6 @@ def _relight(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fov(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a field of view in degrees, got {text!r}") from None
-    if not (math.isfinite(v) and 1.0 <= v <= 179.0):
-        raise argparse.ArgumentTypeError(f"a field of view must lie in [1, 179] degrees, got {text}")
-    return v
-
-
-def _pitch(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a pitch in degrees, got {text!r}") from None
-    if not (math.isfinite(v) and -89.0 <= v <= 89.0):
-        raise argparse.ArgumentTypeError(f"a pitch must lie in [-89, 89] degrees, got {text}")
-    return v
-
-
 def _exposure(text: str) -> str | float:
     from physrelight.exposure import parse_exposure
 
@@ -228,7 +208,7 @@ def _exposure(text: str) -> str | float:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``relight``."""
-    from physrelight.cli_common import positive_int, positive_number
+    from physrelight.cli_common import number_in, positive_int, positive_number
 
     from .relighter import RELIGHT_METHODS, SKY_SOURCES, SKY_TYPES
 
@@ -245,9 +225,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--source-env", default=None, metavar="MAP",
                      help="the photo's own environment map (known-source track: relighting to it gives the photo)")
     src.add_argument("--source-sh", default=None, metavar="F", help="the photo's own order-2 radiance SH, world frame")
-    p.add_argument("--fov", type=_fov, default=None, metavar="DEG",
+    p.add_argument("--fov", type=number_in(1.0, 179.0, "a field of view in degrees"), default=None, metavar="DEG",
                    help="horizontal field of view in degrees (default: from EXIF, else 60)")
-    p.add_argument("--pitch", type=_pitch, default=None, metavar="DEG",
+    p.add_argument("--pitch", type=number_in(-89.0, 89.0, "a pitch in degrees"), default=None, metavar="DEG",
                    help="camera pitch in degrees, up positive (default: estimated from the sky's horizon)")
     p.add_argument("--sky-source", choices=SKY_SOURCES, default=None,
                    help="the relit sky: target (render the target's sky; default for --env/--sun), gan "

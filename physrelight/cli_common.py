@@ -15,7 +15,7 @@ import argparse
 import importlib.metadata
 import math
 import re
-from typing import Sequence
+from typing import Callable, Sequence
 
 __all__ = ["MissingExtra", "missing_requirements", "positive_int", "positive_number", "require_extras"]
 
@@ -35,6 +35,20 @@ def positive_int(text: str) -> int:
     if v <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
     return v
+
+
+def number_in(lo: float, hi: float, what: str) -> Callable[[str], float]:
+    """argparse type: a finite number in ``[lo, hi]`` (``what`` names it in the one-line error)."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise argparse.ArgumentTypeError(f"{what} must lie in [{lo:g}, {hi:g}], got {text}")
+        return v
+
+    return parse
 
 
 def positive_number(text: str) -> float:
