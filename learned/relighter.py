@@ -552,15 +552,15 @@ class Relighter:
         def up(x: torch.Tensor) -> torch.Tensor:
             return torch.nn.functional.interpolate(x, size=size, mode="bilinear", align_corners=False)
 
-        source = sky_source or ("target" if sky_map_kind(target) != "sh" else "gan" if self.sky_generator else "keep")
+        sky_from = sky_source or ("target" if sky_map_kind(target) != "sh" else "gan" if self.sky_generator else "keep")
         if new_sky and bool(sky.any()):
-            if source == "target":
+            if sky_from == "target":
                 # The target's own sky, in the relit foreground's units: the target was scaled by
                 # dc(out target) / dc(target) into the decomposition's (= the photo's linear) units.
                 k = float(dc_luminance(out["target"])[0] / dc_luminance(target_cam[None])[0])
                 radiance = target_sky(target, K, T, h, w, sky_type, azimuth_deg) * k
                 relit = torch.where(sky, radiance.permute(2, 0, 1)[None].to(relit.dtype), relit)
-            elif source == "gan":
+            elif sky_from == "gan":
                 relit = self.paint_sky(relit, sky, out, small_sky, seed=seed)
         relit = relit * exposure_gain(exposure, relit, lin, ~sky, highlights=sky)[:, None, None, None]
 

@@ -192,10 +192,11 @@ def label_components(mask: torch.Tensor) -> torch.Tensor:
 
 def _roughness(lum: torch.Tensor) -> torch.Tensor:
     """``(H, W)`` std of log luminance over 3 x 3 pixels (border windows cut at the image)."""
+    from physrelight.guided_filter import box_filter
+
     ly = torch.log(lum.clamp_min(1e-4))[None, None]
-    m = F.avg_pool2d(ly, 3, 1, 1, count_include_pad=False)
-    m2 = F.avg_pool2d(ly * ly, 3, 1, 1, count_include_pad=False)
-    return (m2 - m * m).clamp_min(0).sqrt()[0, 0]
+    m = box_filter(ly, 1)
+    return (box_filter(ly * ly, 1) - m * m).clamp_min(0).sqrt()[0, 0]
 
 
 def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor, str]:
@@ -270,7 +271,7 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
     for b in range(image.shape[0]):
         kept, why = plausible_sky(prob[b, 0] > 0.5, small[b])
         reasons.append(why)
-        p = torch.where(kept, prob[b, 0], prob[b, 0].clamp(max=0.0))[None, None]
+        p = (prob[b, 0] * kept)[None, None]  # the rejected parts' probability is 0
         if not bool(kept.any()):
             masks.append(torch.zeros(1, 1, *image.shape[-2:], dtype=torch.bool))
             continue

@@ -43,7 +43,7 @@ METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "oracle_sh", "or
 ABS_NAME = "mitsuba_analysis_by_synthesis"
 
 
-def _chw(x: np.ndarray) -> torch.Tensor:
+def to_chw(x: np.ndarray) -> torch.Tensor:
     """``(H, W, C)`` / ``(H, W)`` numpy -> ``(1, C, H, W)`` float32."""
     t = torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))
     return (t[None] if t.ndim == 2 else t.permute(2, 0, 1))[None]
@@ -80,15 +80,15 @@ class OracleSH:
 
     def __call__(self, pair: Pair) -> torch.Tensor:
         v, b = pair.view, pair.target
-        albedo, normals, L = _chw(v.albedo), _chw(v.normal), pair.target_lighting()
+        albedo, normals, L = to_chw(v.albedo), to_chw(v.normal), pair.target_lighting()
         has_sun = bool(np.any(v.sun_sh[b]))
         if self.shadow == "true" and has_sun:
             L_sun = torch.from_numpy((v.sun_sh[b] * pair.gain[None, :]).astype(np.float32))[None]
-            shading = image_model.shading(normals, L - L_sun) + _chw(v.shadow[b]) * image_model.shading(normals, L_sun)
+            shading = image_model.shading(normals, L - L_sun) + to_chw(v.shadow[b]) * image_model.shading(normals, L_sun)
             relit = albedo * shading
         else:
             s = {None: None, "sun": v.shadow[b], "direct": v.direct_shadow[b], "true": v.direct_shadow[b]}[self.shadow]
-            relit = image_model.render(albedo, normals, L, None if s is None else _chw(s))
+            relit = image_model.render(albedo, normals, L, None if s is None else to_chw(s))
         return torch.where(pair.sky(), pair.image(), relit.clamp_min(0.0))
 
 

@@ -45,6 +45,7 @@ import torch
 from learned.relighter import estimate_pitch, target_sky
 from physrelight import colour, envmap, metrics, panorama, sh
 
+from .methods import to_chw
 from .real_metrics import (BOUNDARY_TOLERANCE, ESTIMATES, PSNR_CAP, SEGMENTERS, SELF_METHODS, SKY_SOURCES,
                            SPHERE_NORMALS, brightness_sky, dc_luminance, level_stops, shading_error, targets_for,
                            top_rows_sky)
@@ -79,10 +80,6 @@ SKY_FOREGROUND = "quotient"
 """The foreground under the relit skies of (c): relight's default method."""
 REAL_LEVELS = {"quick": RealLevel("quick", crops=4, targets=2, panels=1, bootstrap=1000),
                "full": RealLevel("full", crops=16, targets=3, panels=4)}
-
-
-def _chw(x: np.ndarray) -> torch.Tensor:
-    return torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32)).permute(2, 0, 1)[None]
 
 
 def _display(linear: torch.Tensor) -> torch.Tensor:
@@ -154,7 +151,7 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
     out["world_sh"] = {name: np.asarray(sh.rotate(L, R.T)).tolist() for name, L in estimates.items()}
 
     # (d) self-relighting: the target is the source; the output should be the photo
-    photo_disp = _chw(crop.display())
+    photo_disp = to_chw(crop.display())
     preds, names = [], []
     for m in SELF_METHODS[:-1]:
         t0 = time.perf_counter()
@@ -186,7 +183,7 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
             res = relighter.relight_full_resolution(lin, seg, target, source_lighting=torch.from_numpy(source).float(),
                                                     method=SKY_FOREGROUND, decomposition=dec)
             relit = res["relit"]
-            exact = _chw(crop.view_of(tgt.env) * k)
+            exact = to_chw(crop.view_of(tgt.env) * k)
             # relight's own sky: the target through the camera as relight has it (the crop's field of
             # view, which its EXIF would give; the pitch estimated from the sky mask; the yaw given)
             estimated = panorama.level_camera(crop.yaw_deg, pitch)
