@@ -41,6 +41,7 @@ __all__ = [
     "l1",
     "mse",
     "psnr",
+    "best_gain",
     "ssim",
     "ssim_map",
     "dssim",
@@ -218,6 +219,37 @@ def psnr(
     pair = _prepare(pred, target, mask, reduction)
     err = _masked_mean((pair.pred - pair.target) ** 2, pair.mask)
     return _finish(10.0 * torch.log10(data_range**2 / err), pair, reduction)
+
+
+def best_gain(pred: Array, target: Array, mask: Array | None = None) -> Any:
+    """The single gain per image that best brings ``pred`` to ``target`` in least squares.
+
+    ``g = sum(pred * target) / sum(pred ** 2)`` over channels and (mask) pixels, so that
+    ``g * pred`` is the prediction with its overall level removed: metrics of ``g * pred``
+    report structure apart from level (exposure-invariant metrics). Meant for *linear*
+    radiance; ``best_gain(k * pred, target) == best_gain(pred, target) / k`` for ``k > 0``,
+    so ``best_gain(pred, target) * pred`` does not change when ``pred`` is scaled.
+    An all-zero prediction (over the mask) gets ``g = 1``.
+
+    Args:
+        pred: ``(B, C, H, W)`` or ``(C, H, W)``, linear, non-negative.
+        target: same shape as ``pred``.
+        mask: optional, see the module docstring.
+
+    Returns:
+        ``(B,)`` gains (``(1,)`` unbatched); torch in, torch out (differentiable).
+
+    Raises:
+        ValueError: bad shapes, NaN/inf, bad or empty mask.
+    """
+    pair = _prepare(pred, target, mask, "none")
+    m = 1.0 if pair.mask is None else pair.mask
+    if pair.mask is not None:
+        _masked_mean(pair.pred, pair.mask)  # raises on an empty mask, naming the image
+    num = (pair.pred * pair.target * m).sum(dim=(1, 2, 3))
+    den = (pair.pred * pair.pred * m).sum(dim=(1, 2, 3))
+    g = torch.where(den > 0, num / den.clamp_min(torch.finfo(den.dtype).tiny), torch.ones_like(den))
+    return pair.restore(g)
 
 
 # ----------------------------------------------------------------------------- SSIM

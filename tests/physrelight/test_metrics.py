@@ -381,3 +381,25 @@ def test_24_other_bad_arguments_are_value_errors(rng):
         pm.psnr(a, b, data_range=0.0)
     with pytest.raises(ValueError, match=r"lab1 must have shape \(\.\.\., 3\), got \(4, 2\)"):
         pm.ciede2000(np.zeros((4, 2)), np.zeros((4, 3)))
+
+
+def test_25_best_gain_is_the_least_squares_gain_and_scales_inversely(rng):
+    """``best_gain`` equals brute-force least squares over a fine gain grid (to the grid's step), scales
+    as 1/k when the prediction is scaled by k (so gain * pred is scale-free), and honours the mask."""
+    pred = rng.uniform(0.1, 1.0, (2, 3, 8, 8))
+    target = 1.7 * pred + rng.normal(0.0, 0.05, pred.shape)
+    mask = rng.random((2, 1, 8, 8)) > 0.3
+    g = pm.best_gain(pred, target, mask)
+    grid = np.linspace(1.0, 2.5, 15001)
+    for b in range(2):
+        m = np.broadcast_to(mask[b], pred[b].shape)
+        sse = [((k * pred[b] - target[b])[m] ** 2).sum() for k in grid]
+        assert abs(g[b] - grid[int(np.argmin(sse))]) <= 1e-4
+    for k in (0.25, 3.7):
+        np.testing.assert_allclose(pm.best_gain(k * pred, target, mask), g / k, rtol=1e-12)
+    # pixels outside the mask do not move it
+    wild = np.where(mask, pred, 100.0)
+    np.testing.assert_allclose(pm.best_gain(wild, target, mask), g, rtol=1e-12)
+    assert np.array_equal(pm.best_gain(np.zeros_like(pred), target), [1.0, 1.0])
+    with pytest.raises(ValueError, match="mask selects no pixels"):
+        pm.best_gain(pred, target, np.zeros((2, 1, 8, 8), bool))

@@ -4,11 +4,16 @@ A method is a callable ``method(pair) -> (1, 3, H, W)`` linear image in the sour
 linear units (:class:`validation.bench.protocols.Pair`), sky pixels equal to the input.
 What each one may use:
 
-``proposed``, ``lambertian_sh``, ``shadownet_lambertian``
+``proposed``, ``lambertian_sh``, ``shadownet_lambertian``, ``quotient`` (the *estimated* track)
     the photo, its sky mask and the target and source lightings (camera-frame SH in the
     photo's units, the protocol): :meth:`learned.Relighter.relight_linear`. The
     decomposition's albedo/lighting scale is fixed by the ratio of the estimated to the
-    given source lighting (``source_lighting=``).
+    given source lighting (``source_lighting=``); the source lighting's shape is the
+    decomposition's estimate. ``quotient`` divides the photo by its estimated shading
+    (:mod:`physrelight.quotient`) instead of re-synthesising it from the albedo.
+``quotient_known`` (the *known* track)
+    quotient relighting with the given source lighting itself as the photo's shading
+    (``known_source=True``: the photo's environment map captured on set).
 ``oracle_sh``, ``oracle_sh_shadow``
     ground-truth albedo and normals with the target's SH shading (the image model
     ``albedo * shading(n; L_target)``, :mod:`physrelight.image_model`), times the
@@ -37,9 +42,15 @@ from physrelight import image_model
 from ..common import LUMINANCE
 from .protocols import Pair
 
-LEARNED = ("proposed", "lambertian_sh", "shadownet_lambertian")
+LEARNED = ("proposed", "lambertian_sh", "shadownet_lambertian", "quotient")
 ORACLES = ("oracle_sh", "oracle_sh_shadow")
-METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "oracle_sh", "oracle_sh_shadow", "identity")
+ESTIMATED_TRACK = ("proposed", "lambertian_sh", "shadownet_lambertian", "quotient")
+"""Only the target lighting is given (its level from the given source): the paper's setting, the headline."""
+KNOWN_TRACK = ("quotient_known",)
+"""The photo's own lighting is given too (an environment map captured on set)."""
+METHODS = ESTIMATED_TRACK + KNOWN_TRACK + ORACLES + ("identity",)
+TRACKS = {"estimated": ESTIMATED_TRACK, "known": KNOWN_TRACK, "oracle": ORACLES, "reference": ("identity",)}
+"""Report groups, never mixed: a method's figures are compared within its track."""
 ABS_NAME = "mitsuba_analysis_by_synthesis"
 
 
@@ -104,18 +115,21 @@ class Learned:
         name: the name reported (default ``method``).
     """
 
-    def __init__(self, relighter: Any, method: str, res: int | None = None, name: str | None = None) -> None:
+    def __init__(self, relighter: Any, method: str, res: int | None = None, name: str | None = None,
+                 known_source: bool = False) -> None:
         if method not in LEARNED:
             raise ValueError(f"method must be one of {LEARNED}, got {method!r}")
-        self.relighter, self.method, self.res = relighter, method, res
-        self.name = name or method
+        if known_source and not method.startswith("quotient"):
+            raise ValueError(f"known_source is a track of the quotient methods, not of {method!r}")
+        self.relighter, self.method, self.res, self.known_source = relighter, method, res, known_source
+        self.name = name or (f"{method}_known" if known_source else method)
 
     def __call__(self, pair: Pair) -> torch.Tensor:
         image = pair.image()
         res = min(image.shape[-2:]) if self.res is None else self.res  # the short side as is = no resampling
         return self.relighter.relight_full_resolution(image, pair.sky(), pair.target_lighting(),
                                                       source_lighting=pair.source_lighting(), method=self.method,
-                                                      working_res=res)["relit"]
+                                                      working_res=res, known_source=self.known_source)["relit"]
 
 
 @dataclass
@@ -217,8 +231,9 @@ class AnalysisBySynthesis:
 
 
 def build_methods(relighter: Any) -> dict[str, Callable[[Pair], torch.Tensor]]:
-    """The six standard methods (:data:`METHODS`), keyed by name."""
+    """The standard methods (:data:`METHODS`), keyed by name."""
     out: dict[str, Callable[[Pair], torch.Tensor]] = {m: Learned(relighter, m) for m in LEARNED}
+    out["quotient_known"] = Learned(relighter, "quotient", known_source=True)
     out["oracle_sh"] = OracleSH(None)
     out["oracle_sh_shadow"] = OracleSH("true")
     out["identity"] = Identity()

@@ -106,6 +106,46 @@ class Pair:
             self._cache["target"] = colour.to_ldr(t.clamp_min(0.0))
         return self._cache["target"]
 
+    def target_linear(self) -> torch.Tensor:
+        """``(1, 3, H, W)`` the path-traced target in this photo's linear units (+ ``eval_stops``), unclipped."""
+        rad = self.view.radiance[self.target] * self.gain[None, None, :] * 2.0**self.eval_stops
+        return torch.from_numpy(np.ascontiguousarray(rad, dtype=np.float32)).permute(2, 0, 1)[None].clamp_min(0.0)
+
+    def display_at_best_gain(self, relit: torch.Tensor) -> torch.Tensor:
+        """``(1, 3, H, W)`` :meth:`display` of ``relit`` times the single gain that minimises its l1.
+
+        The gain ``g`` minimises the foreground l1 between ``display(g * relit)`` and
+        :meth:`target_display` (the reported metric; the display curve and the clipping make a
+        linear least-squares gain a poor fit where the target clips). It is searched as
+        ``g0 * 2**t``, ``t`` in [-4, 4] stops, on a 0.1-stop grid refined by golden section,
+        from ``g0`` = :func:`physrelight.metrics.best_gain` (least squares in linear radiance,
+        which scales as ``1 / k`` when ``relit`` is scaled by ``k``), so the result does not
+        change when ``relit`` is scaled. Metrics of this image report structure with the overall
+        level (exposure) removed.
+        """
+        from physrelight.metrics import best_gain
+
+        x = (relit.clamp_min(0.0) * 2.0**self.eval_stops).double()
+        fg = self.foreground().expand_as(x)
+        tgt = self.target_display().double()[fg]
+        g0 = float(best_gain(x, self.target_linear().double(), self.foreground())[0])
+        xs = x[fg]
+
+        def loss(t: torch.Tensor) -> torch.Tensor:  # (K,) stops -> (K,) l1
+            g = g0 * torch.pow(2.0, t)
+            return (colour.to_ldr(xs[None] * g[:, None]) - tgt[None]).abs().mean(1)
+
+        grid = torch.arange(-40, 41, dtype=torch.float64) / 10.0
+        best = int(torch.argmin(loss(grid)))
+        lo, hi = float(grid[max(best - 1, 0)]), float(grid[min(best + 1, len(grid) - 1)])
+        r = (5 ** 0.5 - 1) / 2
+        for _ in range(30):  # golden section on the bracketing 0.2 stops: to ~1e-7 stops
+            a, b = hi - r * (hi - lo), lo + r * (hi - lo)
+            la, lb = loss(torch.tensor([a, b], dtype=torch.float64))
+            lo, hi = (lo, b) if la <= lb else (a, hi)
+        g = g0 * 2.0 ** ((lo + hi) / 2)
+        return colour.to_ldr(x * g).to(relit.dtype)
+
     def display(self, relit: torch.Tensor) -> torch.Tensor:
         """``(1, 3, H, W)`` a method's linear output (this photo's units) -> display values as the target."""
         return colour.to_ldr(relit.clamp_min(0.0) * 2.0**self.eval_stops)

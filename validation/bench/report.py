@@ -13,7 +13,7 @@ from physrelight import io
 
 from .. import charts
 from ..common import jsonable, machine_line
-from .methods import ABS_NAME, METHODS
+from .methods import ABS_NAME, METHODS, TRACKS
 from .protocols import Pair
 from .strata import STRATA, members
 
@@ -135,6 +135,12 @@ def write_report(out_dir: str | Path, report: dict[str, Any], pairs: list[Pair],
                               "paired": paired},
         "finite": {"passed": bool(finite_ok), "what": "no failure and no NaN/inf output for any method on any pair"},
     }
+    if "quotient" in runs:
+        verdicts["quotient_ordering"] = {
+            "passed": bool(l1["quotient"] < l1["proposed"]), "subject": "quotient",
+            "what": "quotient l1 < proposed l1 (estimated track, all data)",
+            "values": [l1["quotient"], l1["proposed"]],
+            "paired": {"proposed": _paired(runs["quotient"], runs["proposed"], pairs, all_idx)}}
     report.update(methods=methods, strata=strata_json, verdicts=verdicts,
                   protocols={"cross": {"pairs": len(all_idx),
                                        "source_lightings": {k: len(v) for k, v in by_kind.items()}},
@@ -203,14 +209,17 @@ def markdown(report: dict[str, Any], chart_paths: list[tuple[str, str]]) -> str:
               "call, decomposition included.", ""]
     lines += ["## Verdicts", ""]
     for key, label in (("physics_ordering", "Physics ordering"), ("proposed_ordering", "Proposed vs baselines"),
-                       ("finite", "No crash, no NaN")):
+                       ("quotient_ordering", "Quotient vs proposed"), ("finite", "No crash, no NaN")):
+        if key not in v:
+            continue
         x = v[key]
+        subject = x.get("subject", "proposed")
         vals = ""
         if x.get("values"):
             vals = " (" + ", ".join(_fmt(y) for y in x["values"]) + ")"
         lines.append(f"- **{label}: {'PASS' if x['passed'] else 'FAIL'}**: {x['what']}{vals}")
         for other, q in x.get("paired", {}).items():
-            lines.append(f"  - proposed - {other}: l1 {q['mean_diff']:+.4f} on average; proposed better on "
+            lines.append(f"  - {subject} - {other}: l1 {q['mean_diff']:+.4f} on average; {subject} better on "
                          f"{q['pairs_better']} of {q['pairs']} pairs and {q['scenes_better']} of {q['scenes']} scenes "
                          f"(scene means {q['scene_mean_diff']:+.4f} +- {q['scene_se']:.4f} s.e.)")
     if report.get("renderer_weights"):
@@ -227,17 +236,27 @@ def markdown(report: dict[str, Any], chart_paths: list[tuple[str, str]]) -> str:
     lines += ["## Cross-relighting (the paper's Table 2 layout)", "",
               "Each view under each source lighting relit to every other lighting of its scene. Cells: l1 / SSIM, "
               "by the source photo's lighting kind.", "",
-              "| method | " + " | ".join(f"{k} ({report['protocols']['cross']['source_lightings'][k]})" for k in kinds)
-              + " | all |", "| --- |" + " ---: |" * (len(kinds) + 1)]
+              "| track | method | " + " | ".join(f"{k} ({report['protocols']['cross']['source_lightings'][k]})"
+                                                 for k in kinds)
+              + " | all |", "| --- | --- |" + " ---: |" * (len(kinds) + 1)]
+    track_of = {n: t for t, ns in TRACKS.items() for n in ns}
     for n in names:
         cells = [f"{_fmt(m[n]['by_source_lighting'][k]['l1'])} / {_fmt(m[n]['by_source_lighting'][k]['ssim'], 'ssim')}"
                  for k in kinds]
-        lines.append(f"| {n} | " + " | ".join(cells) + f" | {_fmt(m[n]['l1'])} / {_fmt(m[n]['ssim'], 'ssim')} |")
-    lines += ["", "All metrics, all cross-relighting pairs:", "",
-              "| method | " + " | ".join(LABELS[k] for k in LABELS) + " | s / image |", "| --- |" + " ---: |" * 7]
+        lines.append(f"| {track_of.get(n, '')} | {n} | " + " | ".join(cells)
+                     + f" | {_fmt(m[n]['l1'])} / {_fmt(m[n]['ssim'], 'ssim')} |")
+    lines += ["", "All metrics, all cross-relighting pairs, by lighting track (*estimated*: only the target lighting "
+              "is given, its level from the given source; *known*: the photo's own lighting is given too; *oracle*: "
+              "ground-truth albedo and normals). The last three columns are exposure-invariant: l1, SSIM and PSNR "
+              "after the output's best single gain per image (least squares against the target's linear radiance "
+              "on the foreground), i.e. structure apart from level:", "",
+              "| track | method | " + " | ".join(LABELS[k] for k in LABELS)
+              + " | s / image | l1 at best gain | SSIM at best gain | PSNR at best gain |",
+              "| --- | --- |" + " ---: |" * 10]
     for n in names:
-        lines.append(f"| {n} | " + " | ".join(_fmt(m[n][k], k) for k in LABELS) +
-                     f" | {m[n]['seconds_per_image']:.3f} |")
+        gain = " | ".join(_fmt(m[n].get("gain_" + k, math.nan), k) for k in ("l1", "ssim", "psnr"))
+        lines.append(f"| {track_of.get(n, '')} | {n} | " + " | ".join(_fmt(m[n][k], k) for k in LABELS) +
+                     f" | {m[n]['seconds_per_image']:.3f} | {gain} |")
     ot = report["oracle_by_target_lighting"]
     diag = report["diagnostics"]
     lines += ["", "The oracles by *target* lighting kind (l1). `oracle_sh_shadow` multiplies the sun's light by its "

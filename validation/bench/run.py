@@ -23,7 +23,7 @@ import torch
 from .data import BenchView, LightSpec, Recipe, load_dataset, render_recipes, timelapse_lights
 from .methods import ABS_NAME, AnalysisBySynthesis, Learned, OracleSH, build_methods
 from .protocols import VARIANTS, Pair, cross_pairs, describe_pairs, informative_pairs, timelapse_pairs
-from .scores import MethodRun, score
+from .scores import GAIN_METRICS, MethodRun, score
 
 S = LightSpec
 # Scenes rendered when no --data is given (quick): sky-model lightings with chosen sun positions.
@@ -107,7 +107,7 @@ def evaluate(name: str, method: Callable[[Pair], torch.Tensor], pairs: Sequence[
              progress: Callable[[str], None] = lambda m: None) -> MethodRun:
     """Run ``method`` on every pair (timed), never crash: a failure is recorded and the input is
     scored in its place; non-finite outputs are counted and zeroed."""
-    preds, targets, masks, seconds, failures, nonfinite = [], [], [], [], [], 0
+    preds, gained, targets, masks, seconds, failures, nonfinite = [], [], [], [], [], [], 0
     t_report = time.perf_counter()
     for i, p in enumerate(pairs):
         t0 = time.perf_counter()
@@ -126,12 +126,16 @@ def evaluate(name: str, method: Callable[[Pair], torch.Tensor], pairs: Sequence[
             out = torch.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
         fg, tgt = p.foreground(), p.target_display()
         preds.append(torch.where(fg, p.display(out.float()), tgt))
+        gained.append(torch.where(fg, p.display_at_best_gain(out.float()), tgt))
         targets.append(tgt)
         masks.append(fg)
         if time.perf_counter() - t_report > 30:
             progress(f"  {name}: {i + 1}/{len(pairs)} pairs")
             t_report = time.perf_counter()
-    return MethodRun(name, [p.key for p in pairs], score(preds, targets, masks), seconds, nonfinite, failures, method)
+    values = score(preds, targets, masks)
+    values.update({"gain_" + k: v for k, v in score(gained, targets, masks,
+                                                     which=[m.removeprefix("gain_") for m in GAIN_METRICS]).items()})
+    return MethodRun(name, [p.key for p in pairs], values, seconds, nonfinite, failures, method)
 
 
 def spread(n: int, k: int) -> list[int]:

@@ -15,10 +15,13 @@ import torch
 
 from physrelight import metrics
 
-__all__ = ["METRICS", "MethodRun", "score"]
+__all__ = ["GAIN_METRICS", "METRICS", "MethodRun", "score"]
 
 METRICS = ("l1", "mse", "ssim", "dssim", "psnr", "ciede2000")
 """Reported per pair, on foreground pixels of display values (sRGB, [0, 1])."""
+GAIN_METRICS = ("gain_l1", "gain_ssim", "gain_psnr")
+"""Exposure-invariant: ``l1``, ``ssim``, ``psnr`` of the output after its best single gain per
+image (:meth:`validation.bench.protocols.Pair.display_at_best_gain`): structure apart from level."""
 
 
 @dataclass
@@ -39,8 +42,14 @@ class MethodRun:
 
 
 def score(preds: list[torch.Tensor], targets: list[torch.Tensor], masks: list[torch.Tensor],
-          chunk: int = 64) -> dict[str, np.ndarray]:
-    """Per-pair metrics ``{name: (N,)}`` of display images ``(1, 3, H, W)`` on foreground masks ``(1, 1, H, W)``."""
+          chunk: int = 64, which: Sequence[str] = METRICS) -> dict[str, np.ndarray]:
+    """Per-pair metrics ``{name: (N,)}`` of display images ``(1, 3, H, W)`` on foreground masks ``(1, 1, H, W)``.
+
+    ``which``: the metrics to compute (a subset of :data:`METRICS`).
+    """
+    bad = [m for m in which if m not in METRICS]
+    if bad:
+        raise ValueError(f"unknown metrics {bad}; expected a subset of {METRICS}")
     out: dict[str, list[np.ndarray]] = {m: [] for m in METRICS}
     for s in range(0, len(preds), chunk):
         p, t, m = (torch.cat(x[s:s + chunk]).double() for x in (preds, targets, masks))
@@ -53,5 +62,6 @@ def score(preds: list[torch.Tensor], targets: list[torch.Tensor], masks: list[to
             ss = metrics.ssim(p.float(), t.float(), reduction="none").double().numpy()
         out["ssim"].append(ss)
         out["dssim"].append((1.0 - ss) / 2.0)
-        out["ciede2000"].append(metrics.delta_e2000(p, t, m, reduction="none").numpy())
-    return {k: np.concatenate(v) if v else np.zeros(0) for k, v in out.items()}
+        if "ciede2000" in which:  # the slow one
+            out["ciede2000"].append(metrics.delta_e2000(p, t, m, reduction="none").numpy())
+    return {k: np.concatenate(v) if v else np.zeros(0) for k, v in out.items() if k in which}
