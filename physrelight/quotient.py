@@ -14,9 +14,21 @@ guarded where the source shading is small (a back-facing normal, an umbra): both
 * invariant to the albedo/lighting scale (scaling both lightings by ``k`` scales the guard too);
 * bounded where the source shading vanishes.
 
+Sun-only shadows. A sun visibility ``v`` (synth's ``shadow.exr``, or
+:func:`physrelight.screen_space_shadow.sun_visibility`) belongs to the sun's light only: the sky
+still lights an umbra. With ``source_sun`` / ``target_sun``, the SH of the sun's part of each
+lighting, a given shadow multiplies that part only, as ``oracle_sh_shadow`` does:
+
+    shaded = shading(n; L - L_sun) + v * shading(n; L_sun)    (clamped at 0),
+
+so the denominator removes the photo's own sun shadows and the numerator casts the target's. Without
+a sun part (None) a shadow multiplies the whole shading, as before; without a shadow the sun part is
+ignored and the shading is exactly the unsplit one.
+
 Shapes: ``image (B, 3, H, W)`` linear, ``normals (B, 3, H, W)`` camera frame, lightings
 ``(B, 9, 3)`` radiance SH in the same frame and units, shadows ``(B, 1, H, W)`` in [0, 1] (None = 1),
-``mask (B, 1, H, W)`` bool (True = foreground; the guard's mean is taken there).
+``mask (B, 1, H, W)`` bool (True = foreground; the guard's mean is taken there), sun parts
+``(B, 9, 3)`` in the lightings' frame and units (None = the shadow applies to all the light).
 """
 
 from __future__ import annotations
@@ -30,18 +42,30 @@ __all__ = ["DEFAULT_GUARD", "quotient_ratio", "quotient_relight"]
 DEFAULT_GUARD = 0.05
 
 
-def _shaded(normals: torch.Tensor, lighting: torch.Tensor, shadow: torch.Tensor | None) -> torch.Tensor:
+def _shaded(normals: torch.Tensor, lighting: torch.Tensor, shadow: torch.Tensor | None,
+            sun: torch.Tensor | None = None) -> torch.Tensor:
+    if shadow is not None and sun is not None:  # the shadow dims the sun's light only
+        sky = image_model.shading(normals, lighting - sun)
+        return (sky + shadow.clamp(0.0, 1.0) * image_model.shading(normals, sun)).clamp_min(0.0)
     s = image_model.shading(normals, lighting).clamp_min(0.0)
     return s if shadow is None else s * shadow.clamp(0.0, 1.0)
 
 
+def _check_shadow(name: str, shadow: torch.Tensor | None, b: int, hw: tuple[int, ...]) -> None:
+    if shadow is not None and tuple(shadow.shape) != (b, 1, *hw):
+        raise ValueError(f"{name} must have shape ({b}, 1, {hw[0]}, {hw[1]}), got {tuple(shadow.shape)}")
+
+
 def quotient_ratio(normals: torch.Tensor, source: torch.Tensor, target: torch.Tensor,
                    mask: torch.Tensor | None = None, source_shadow: torch.Tensor | None = None,
-                   target_shadow: torch.Tensor | None = None, guard: float = DEFAULT_GUARD) -> torch.Tensor:
+                   target_shadow: torch.Tensor | None = None, guard: float = DEFAULT_GUARD, *,
+                   source_sun: torch.Tensor | None = None, target_sun: torch.Tensor | None = None) -> torch.Tensor:
     """``(B, 3, H, W)`` the guarded ratio ``(s_t S_t + g) / (s_s S_s + g)`` per colour channel.
 
     ``g`` is ``guard`` times the mean of ``s_s S_s`` over ``mask`` (every pixel when None or
-    empty), per image and channel. Raises ``ValueError`` for bad shapes or a non-positive guard.
+    empty), per image and channel. With ``source_sun`` / ``target_sun`` ``(B, 9, 3)`` (the sun's
+    part of each lighting) a given shadow multiplies that part only (the module doc). Raises
+    ``ValueError`` for bad shapes or a non-positive guard.
     """
     if normals.ndim != 4 or normals.shape[1] != 3:
         raise ValueError(f"normals must have shape (B, 3, H, W), got {tuple(normals.shape)}")
@@ -49,10 +73,16 @@ def quotient_ratio(normals: torch.Tensor, source: torch.Tensor, target: torch.Te
     for name, L in (("source", source), ("target", target)):
         if L.shape != (b, 9, 3):
             raise ValueError(f"{name} lighting must have shape ({b}, 9, 3), got {tuple(L.shape)}")
+    for name, L in (("source_sun", source_sun), ("target_sun", target_sun)):
+        if L is not None and L.shape != (b, 9, 3):
+            raise ValueError(f"{name} must have shape ({b}, 9, 3), got {tuple(L.shape)}")
+    if source_sun is not None or target_sun is not None:  # the old path never checked the shadows' shape
+        _check_shadow("source_shadow", source_shadow, b, normals.shape[-2:])
+        _check_shadow("target_shadow", target_shadow, b, normals.shape[-2:])
     if not guard > 0:
         raise ValueError(f"guard must be positive, got {guard!r}")
-    s_src = _shaded(normals, source, source_shadow)
-    s_tgt = _shaded(normals, target, target_shadow)
+    s_src = _shaded(normals, source, source_shadow, source_sun)
+    s_tgt = _shaded(normals, target, target_shadow, target_sun)
     if mask is None:
         mean = s_src.mean((2, 3), keepdim=True)
     else:
@@ -66,8 +96,10 @@ def quotient_ratio(normals: torch.Tensor, source: torch.Tensor, target: torch.Te
 
 def quotient_relight(image: torch.Tensor, normals: torch.Tensor, source: torch.Tensor, target: torch.Tensor,
                      mask: torch.Tensor | None = None, source_shadow: torch.Tensor | None = None,
-                     target_shadow: torch.Tensor | None = None, guard: float = DEFAULT_GUARD) -> torch.Tensor:
+                     target_shadow: torch.Tensor | None = None, guard: float = DEFAULT_GUARD, *,
+                     source_sun: torch.Tensor | None = None, target_sun: torch.Tensor | None = None) -> torch.Tensor:
     """``(B, 3, H, W)`` the photo relit by :func:`quotient_ratio` (``image * ratio``)."""
     if image.shape != normals.shape:
         raise ValueError(f"image {tuple(image.shape)} and normals {tuple(normals.shape)} must have the same shape")
-    return image * quotient_ratio(normals, source, target, mask, source_shadow, target_shadow, guard)
+    return image * quotient_ratio(normals, source, target, mask, source_shadow, target_shadow, guard,
+                                  source_sun=source_sun, target_sun=target_sun)
