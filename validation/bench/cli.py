@@ -56,6 +56,10 @@ def _handler(args: argparse.Namespace) -> int:
 
     words = ["physrelight", "bench", "--full" if args.full else "--quick"]
     progress = (lambda msg: None) if args.quiet else (lambda msg: print(msg, flush=True))
+    if args.full_resolution:
+        from .full_resolution import main
+
+        return main(args, progress)
     if args.real:
         words.insert(2, "--real")
         if args.hdri_dir is not None:
@@ -114,5 +118,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fov", nargs=2, type=float, default=[45.0, 75.0], metavar=("LO", "HI"),
                    help="with --real: the crops' horizontal field of view range in degrees (default: 45 75)")
     p.add_argument("--seed", type=int, default=0, help="with --real: crops, photo noise and SkyGAN noise (default 0)")
+    p.add_argument("--full-resolution", action="store_true",
+                   help="relit l1 and halo error at depth edges of a synth folder rendered at 256 px (--data, default "
+                        "data/heldout256): working at 64 px with bilinear or guided transfer, or at 256 px "
+                        "(validation/bench/full_resolution.py); writes OUT/full_resolution.md and .json")
+    p.add_argument("--native-data", default=None, metavar="DIR",
+                   help="with --full-resolution: the same scenes rendered at 64 px (e.g. data/heldout), scored too")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_handler)
