@@ -802,7 +802,7 @@ def transfer_to_full_resolution(full: torch.Tensor, small: torch.Tensor, relit_s
     def up(x: torch.Tensor) -> torch.Tensor:
         return torch.nn.functional.interpolate(x, size=size, mode="bilinear", align_corners=False)
 
-    ratio = relit_small / small.clamp_min(eps)
+    ratio = _fill_dark(relit_small / small.clamp_min(eps), small > eps)
     lit = up(small) > eps
     if guided:
         from physrelight.guided_filter import guided_upsample
@@ -813,6 +813,29 @@ def transfer_to_full_resolution(full: torch.Tensor, small: torch.Tensor, relit_s
     else:
         ratio_up = up(ratio)
     return torch.where(lit, full * ratio_up, up(relit_small))
+
+
+def _fill_dark(ratio: torch.Tensor, lit: torch.Tensor) -> torch.Tensor:
+    """``ratio (B, C, h, w)`` with its values on unlit pixels (``lit`` False, same shape) replaced by
+    the mean of the lit ones nearby (normalised box filters of growing radius; 1 where an image
+    channel has no lit pixel at all).
+
+    A black working pixel has no ratio (``relit / eps`` is noise); left in, upsampling spreads it into
+    its lit neighbours before the black-pixel fallback applies (a constant ratio of 1.7 next to an
+    8x8 black corner came out as low as 0.21 on 241 lit pixels with the guided transfer)."""
+    from physrelight.guided_filter import box_filter
+
+    w = lit.to(ratio.dtype)
+    out = torch.where(lit, ratio, torch.ones_like(ratio))
+    todo = ~lit
+    r = 1
+    while bool(todo.any()) and r <= 2 * max(ratio.shape[-2:]):
+        num, den = box_filter(ratio * w, r), box_filter(w, r)
+        fill = todo & (den > 0)
+        out = torch.where(fill, num / den.clamp_min(1e-12), out)
+        todo = todo & ~fill
+        r *= 2
+    return out
 
 
 GUIDE_EPS = 0.05

@@ -107,6 +107,22 @@ def test_05_full_resolution_transfer_keeps_detail_through_a_smooth_relighting() 
     assert float((naive - full * up_gain).abs().mean()) > 20 * float((back - full * up_gain).abs().mean()) + 1e-3
 
 
+@pytest.mark.parametrize("guided", [True, False])
+def test_05b_black_working_pixels_do_not_bleed_into_lit_neighbours(guided: bool) -> None:
+    """A constant ratio next to a black corner stays that ratio on every lit pixel (1e-5): the black
+    pixels' meaningless ratio is not upsampled into their neighbours (issue 25's study found lit pixels
+    down to a ratio of 0.21 with the guided transfer and 1.06 with the bilinear one)."""
+    from learned.relighter import transfer_to_full_resolution, working_resolution
+
+    g = torch.Generator().manual_seed(2)
+    full = torch.rand(1, 3, 128, 128, generator=g) * 0.8 + 0.1
+    full[..., :32, :32] = 0.0  # 8x8 black working pixels
+    small, _ = working_resolution(full, torch.zeros(1, 1, 128, 128, dtype=torch.bool), 32)
+    back = transfer_to_full_resolution(full, small, small * 1.7, guided=guided)
+    lit = (torch.nn.functional.interpolate(small, size=(128, 128), mode="bilinear", align_corners=False) > 1e-3)
+    torch.testing.assert_close(back[lit], (full * 1.7)[lit], rtol=1e-5, atol=1e-6)
+
+
 def test_06_relight_any_size_photo_and_bad_input(relighter) -> None:
     rng = np.random.default_rng(4)
     photo = (rng.uniform(0.1, 0.9, (50, 70, 3)) * 255).astype(np.uint8)
