@@ -115,9 +115,10 @@ def test_01_box_on_a_plane_matches_exact_ray_cast_visibility_away_from_edges() -
 
     Measured (outside the 1-pixel band of object and shadow edges): sun (-0.5, 0.7, -0.5) (shadow
     falls towards the camera, in full view) 99.74 % of 14729 pixels, shadow IoU 0.976; sun
-    (-0.3, 0.4, 0.8) (behind the camera's side) 99.99 %. Where the ray passes behind the box without
-    meeting a face the camera sees (sun (0.6, 0.5, -0.8)) the figure drops to 99.35 %: the documented
-    limitation, not asserted here.
+    (-0.3, 0.4, 0.8) (behind the camera's side) 99.99 %. The two failure modes of a depth buffer, not
+    asserted here: a ray that passes behind the box without meeting a face the camera sees (sun
+    (0.6, 0.5, -0.8): 99.35 %, missed shadow) and a ray that passes behind it within the thickness
+    (sun (-0.8, 0.6, 0.1): 99.34 %, false shadow on the ground behind the box).
     """
     for sun, floor in (((-0.5, 0.7, -0.5), 0.99), ((-0.3, 0.4, 0.8), 0.99)):
         scene = box_scene(128, sun, eye=EYE)
