@@ -246,11 +246,30 @@ class Relighter:
             raise ValueError("target holds NaN or inf")
         return torch.as_tensor(sh.rotate(coeffs, _rotation(world_to_camera)))
 
+    def target_sun(self, target: Any, world_to_camera: Any = None, sky: str = "clear") -> torch.Tensor | None:
+        """``(9, 3)`` camera-frame radiance SH of the sun alone within a target (see
+        :meth:`target_lighting`), or None when it has none: a sun direction's delta sun (clear sky),
+        an environment map's sun as :func:`envmap_sun` finds it; SH targets and overcast skies: None."""
+        if isinstance(target, (str, os.PathLike)):
+            from physrelight import envmap
+
+            target = envmap.read(target)
+        t = np.asarray(target.detach().cpu().double() if isinstance(target, torch.Tensor) else target, np.float64)
+        if t.shape == (3,):
+            coeffs = None if sky == "overcast" else sh.project_sun(_sun_direction(t), np.ones(3), order=2)
+        elif t.ndim == 3 and t.shape[-1] == 3 and t.shape[1] == 2 * t.shape[0]:
+            sun = envmap_sun(t)
+            coeffs = None if sun is None else np.asarray(sh.project_envmap(sun, order=2))
+        else:
+            coeffs = None
+        return None if coeffs is None else torch.as_tensor(sh.rotate(coeffs, _rotation(world_to_camera)))
+
     @torch.no_grad()
     def relight_linear(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
-                       source_lighting: torch.Tensor | None = None, method: str = "proposed",
+                       source_lighting: torch.Tensor | None = None, method: str = "quotient",
                        decomposition: dict[str, torch.Tensor] | None = None,
-                       known_source: bool = False) -> dict[str, torch.Tensor]:
+                       known_source: bool = False, *, target_sun: torch.Tensor | None = None,
+                       source_sun: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """Relight linear images to a camera-frame SH target; tensors in, tensors out.
 
         Args:
@@ -264,7 +283,8 @@ class Relighter:
                 source / ``target``, i.e. the photo keeps its exposure and only the lighting's
                 shape changes). An estimate without a positive DC term (no usable foreground)
                 takes the lighting prior's mean level instead.
-            method: ``"proposed"`` (the neural renderer; ``"shadownet_lambertian"`` when no
+            method: ``"quotient"`` (the default: on ``bench --full`` it is at least as accurate as
+                the neural renderer and faster, docs/bench.md), ``"proposed"`` (the neural renderer; ``"shadownet_lambertian"`` when no
                 renderer weights are loaded), ``"lambertian_sh"`` (``albedo * shading(n; target)``,
                 the InverseRenderNet-style baseline), ``"shadownet_lambertian"`` (times
                 ShadowNet's shadow for the target), ``"quotient"`` (the photo times
@@ -278,6 +298,11 @@ class Relighter:
                 taken from ``source_lighting``. True (*known*): the source shading is
                 ``source_lighting`` itself (the photo's own environment map, measured on set), so a
                 target equal to it gives the photo back exactly. The other methods ignore it.
+            target_sun, source_sun: ``(B, 9, 3)`` or ``(9, 3)`` the radiance SH of the sun alone
+                within ``target`` / ``source_lighting`` (same units), or None. The quotient methods
+                then shade the sun by its exact clamped cosine and the rest by SH
+                (:func:`physrelight.quotient.quotient_ratio` ``sun_cosine``); ``source_sun`` is read
+                on the known track only (on the estimated one the source is the decomposition's SH).
 
         Returns:
             ``relit (B, 3, H, W)`` linear, sky pixels equal to ``image``; ``target (B, 9, 3)`` in
@@ -316,8 +341,14 @@ class Relighter:
         if method in ("quotient", "quotient_shadownet"):
             src = source * scale if known_source else out["lighting"]
             src_shadow = out["shadow"] if method == "quotient_shadownet" else None
+            t_sun = None if target_sun is None else batch_sh(target_sun, "target_sun") * scale
+            s_sun = None
+            if known_source and t_sun is not None:
+                s_sun = (torch.zeros_like(src) if source_sun is None
+                         else batch_sh(source_sun, "source_sun") * scale)
             relit = quotient_relight(image.float(), out["normals"], src, tgt, mask=~sky, source_shadow=src_shadow,
-                                     target_shadow=s if method == "quotient_shadownet" else None)
+                                     target_shadow=s if method == "quotient_shadownet" else None,
+                                     source_sun=s_sun, target_sun=t_sun, sun_cosine=t_sun is not None)
         elif method == "proposed" and self.renderer is not None:
             from .neural_renderer import render_relit
 
@@ -330,10 +361,10 @@ class Relighter:
 
     @torch.no_grad()
     def relight_full_resolution(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
-                                source_lighting: torch.Tensor | None = None, method: str = "proposed",
+                                source_lighting: torch.Tensor | None = None, method: str = "quotient",
                                 working_res: int | None = None,
                                 decomposition: dict[str, torch.Tensor] | None = None,
-                                known_source: bool = False) -> dict[str, Any]:
+                                known_source: bool = False, **sun: torch.Tensor | None) -> dict[str, Any]:
         """:meth:`relight_linear` at a working resolution, brought back to the image's size.
 
         The image is resized so its short side is ``working_res`` (None: the networks' ``res``;
@@ -342,7 +373,7 @@ class Relighter:
 
         Args:
             image: ``(B, 3, H, W)`` linear; sky ``(B, 1, H, W)`` bool; target, source_lighting,
-                method, known_source: as for :meth:`relight_linear`.
+                method, known_source, ``target_sun=``, ``source_sun=``: as for :meth:`relight_linear`.
             decomposition: the ``"working"`` dict of an earlier call on the same image and sky at the
                 same working resolution (its decomposition is reused), or None.
 
@@ -352,7 +383,7 @@ class Relighter:
         """
         small, small_sky = working_resolution(image, sky, self.res if working_res is None else working_res)
         out = self.relight_linear(small, small_sky, target, source_lighting=source_lighting, method=method,
-                                  decomposition=decomposition, known_source=known_source)
+                                  decomposition=decomposition, known_source=known_source, **sun)
         relit = torch.where(sky, image, transfer_to_full_resolution(image, small, out["relit"]))
         return {"relit": relit, "working": out, "working_sky": small_sky}
 
@@ -382,7 +413,7 @@ class Relighter:
         return torch.where(sky, painted, relit)
 
     def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
-                method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
+                method: str = "quotient", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
                 seed: int = 0, sky_source: str | None = None, exposure: str | float = "keep",
                 fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None, source: Any = None) -> Any:
         """Relight a photo of any size to a target lighting; the relit photo only.
@@ -400,7 +431,7 @@ class Relighter:
         return _give_back(torch.cat(frames), kind)
 
     def relight_sequence(self, image: Any, target: Any, azimuths_deg: Any, world_to_camera: Any = None,
-                         sky_mask: Any = None, method: str = "proposed", sky: str = "clear", new_sky: bool = True,
+                         sky_mask: Any = None, method: str = "quotient", sky: str = "clear", new_sky: bool = True,
                          seed: int = 0, progress: bool = False, sky_source: str | None = None,
                          exposure: str | float = "keep", fov_deg: float = DEFAULT_FOV_DEG,
                          pitch_deg: float | None = None, source: Any = None) -> list[Any]:
@@ -422,7 +453,7 @@ class Relighter:
                 for a in tqdm(azimuths, desc="relight", disable=not progress)]
 
     def relight_layers(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
-                       method: str = "proposed", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
+                       method: str = "quotient", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
                        seed: int = 0, sky_source: str | None = None, exposure: str | float = "keep",
                        fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None,
                        source: Any = None) -> dict[str, np.ndarray]:
@@ -534,6 +565,8 @@ class Relighter:
         K, T = reuse["camera"]
         target_cam = self.target_lighting(rotate_azimuth(target, azimuth_deg) if azimuth_deg else target, T,
                                           sky_type).float()
+        turned = rotate_azimuth(target, azimuth_deg) if azimuth_deg else target
+        suns: dict[str, torch.Tensor | None] = {"target_sun": self.target_sun(turned, T, sky_type)}
         source_cam = None
         if source is not None:
             if isinstance(source, (str, os.PathLike)):
@@ -541,8 +574,11 @@ class Relighter:
 
                 source = envmap.read(source)
             source_cam = self.target_lighting(source, T, sky_type).float()
+            suns["source_sun"] = self.target_sun(source, T, sky_type)
+        suns = {k: None if v is None else v.float() for k, v in suns.items()}
         full = self.relight_full_resolution(lin, sky, target_cam, method=method, source_lighting=source_cam,
-                                            decomposition=reuse.get("decomposition"), known_source=source is not None)
+                                            decomposition=reuse.get("decomposition"), known_source=source is not None,
+                                            **suns)
         if "decomposition" not in reuse:
             reuse["decomposition"] = {k: full["working"][k] for k in (
                 "albedo", "normals", "shadow", "lighting", "foreground")}
@@ -672,6 +708,35 @@ def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
         return coeffs
     return sh.project_sun(d, np.ones(3), order=2) + coeffs
 
+
+
+SUN_SHARE_OF_PEAK = 0.25
+SUN_OVER_MEDIAN = 100.0
+SUN_RADIUS_CAP_DEG = 3.0
+
+
+def envmap_sun(env: Any) -> np.ndarray | None:
+    """``(H, 2H, 3)`` the sun of an environment map alone (its other texels 0), or None.
+
+    The sun is the set of texels within :data:`SUN_RADIUS_CAP_DEG` of the brightest texel, at least
+    :data:`SUN_SHARE_OF_PEAK` of its luminance *and* :data:`SUN_OVER_MEDIAN` times the map's median
+    luminance: only a compact source far brighter than the sky passes (a clear sky's sun is
+    10^3-10^5 times its sky); an overcast map has none. One direction only: a second bright source
+    (a studio's other lamp) stays in the SH part.
+    """
+    from physrelight import envmap as _envmap
+
+    e = np.asarray(env, dtype=np.float64)
+    lum = e @ np.asarray(colour.LUMINANCE, dtype=np.float64)
+    peak, median = float(lum.max()), float(np.median(lum))
+    if not peak > 0:
+        return None
+    dirs = np.asarray(_envmap.directions(e.shape[0], e.shape[1]), dtype=np.float64)
+    near = dirs @ dirs.reshape(-1, 3)[int(np.argmax(lum))] >= math.cos(math.radians(SUN_RADIUS_CAP_DEG))
+    sun = near & (lum >= SUN_SHARE_OF_PEAK * peak) & (lum >= SUN_OVER_MEDIAN * max(median, 1e-12))
+    if not sun.any():
+        return None
+    return np.where(sun[..., None], e, 0.0)
 
 
 def sky_map_kind(target: Any) -> str:

@@ -78,6 +78,30 @@ def shading(normals: Array, lighting: Array) -> Array:
     return restore(torch.einsum("bkhw,bkc->bchw", _shading_basis(n, order), c))
 
 
+def sun_shading(normals: Array, sun: Array) -> Array:
+    """Exact Lambertian shading of a delta sun, ``E max(0, n . s) / pi``, from its radiance SH.
+
+    :func:`shading` of the sun's order-2 SH is this clamped cosine band-limited: it rings (light
+    behind the terminator, up to ~10 % of ``E / pi`` too little facing the sun). A sun is one
+    direction and one colour, so the exact term costs nothing more; the sun is read from its SH by
+    :func:`physrelight.sh.sun_of`.
+
+    Args:
+        normals: ``(B, 3, H, W)`` unit normals; zero vectors (no surface) get 0.
+        sun: ``(K, 3)`` or ``(B, K, 3)`` radiance SH of the sun alone (``K >= 4``), same frame.
+
+    Returns:
+        ``(B, 3, H, W)`` shading.
+    """
+    n, restore = to_tensor(normals, "normals")
+    check_image(n, "normals", 3)
+    check_finite(n, "normals")
+    c, _ = _lighting(to_tensor(sun, "sun")[0].to(n.dtype), n.shape[0], "sun")
+    d, e = sh.sun_of(c)
+    cos = torch.einsum("bchw,bc->bhw", n, d).clamp_min(0.0)[:, None]
+    return restore(cos * e[:, :, None, None] / math.pi * _valid_normals(n).to(n.dtype))
+
+
 def render(albedo: Array, normals: Array, lighting: Array, shadow: Array | None = None) -> Array:
     """The image model ``i = s * albedo * shading(n; L)``.
 

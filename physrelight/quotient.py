@@ -21,7 +21,10 @@ lighting, a given shadow multiplies that part only, as ``oracle_sh_shadow`` does
 
     shaded = shading(n; L - L_sun) + v * shading(n; L_sun)    (clamped at 0),
 
-so the denominator removes the photo's own sun shadows and the numerator casts the target's. Without
+so the denominator removes the photo's own sun shadows and the numerator casts the target's. With
+``sun_cosine`` the sun's part is shaded exactly, ``E max(0, n . s) / pi``, rather than by its
+order-2 SH (which rings: a sun is one direction, so "no more than the scene needs" is the exact
+term plus an order-2 sky). Without
 a sun part (None) a shadow multiplies the whole shading, as before; without a shadow the sun part is
 ignored and the shading is exactly the unsplit one.
 
@@ -43,7 +46,12 @@ DEFAULT_GUARD = 0.05
 
 
 def _shaded(normals: torch.Tensor, lighting: torch.Tensor, shadow: torch.Tensor | None,
-            sun: torch.Tensor | None = None) -> torch.Tensor:
+            sun: torch.Tensor | None = None, sun_cosine: bool = False) -> torch.Tensor:
+    if sun is not None and sun_cosine:  # the sun's exact clamped cosine, the rest in SH
+        direct = image_model.sun_shading(normals, sun)
+        if shadow is not None:
+            direct = shadow.clamp(0.0, 1.0) * direct
+        return (image_model.shading(normals, lighting - sun) + direct).clamp_min(0.0)
     if shadow is not None and sun is not None:  # the shadow dims the sun's light only
         sky = image_model.shading(normals, lighting - sun)
         return (sky + shadow.clamp(0.0, 1.0) * image_model.shading(normals, sun)).clamp_min(0.0)
@@ -59,12 +67,15 @@ def _check_shadow(name: str, shadow: torch.Tensor | None, b: int, hw: tuple[int,
 def quotient_ratio(normals: torch.Tensor, source: torch.Tensor, target: torch.Tensor,
                    mask: torch.Tensor | None = None, source_shadow: torch.Tensor | None = None,
                    target_shadow: torch.Tensor | None = None, guard: float = DEFAULT_GUARD, *,
-                   source_sun: torch.Tensor | None = None, target_sun: torch.Tensor | None = None) -> torch.Tensor:
+                   source_sun: torch.Tensor | None = None, target_sun: torch.Tensor | None = None,
+                   sun_cosine: bool = False) -> torch.Tensor:
     """``(B, 3, H, W)`` the guarded ratio ``(s_t S_t + g) / (s_s S_s + g)`` per colour channel.
 
     ``g`` is ``guard`` times the mean of ``s_s S_s`` over ``mask`` (every pixel when None or
     empty), per image and channel. With ``source_sun`` / ``target_sun`` ``(B, 9, 3)`` (the sun's
-    part of each lighting) a given shadow multiplies that part only (the module doc). Raises
+    part of each lighting) a given shadow multiplies that part only (the module doc); with
+    ``sun_cosine`` that part is shaded by the sun's exact clamped cosine
+    (:func:`physrelight.image_model.sun_shading`) instead of its order-2 SH. Raises
     ``ValueError`` for bad shapes or a non-positive guard.
     """
     if normals.ndim != 4 or normals.shape[1] != 3:
@@ -81,8 +92,8 @@ def quotient_ratio(normals: torch.Tensor, source: torch.Tensor, target: torch.Te
         _check_shadow("target_shadow", target_shadow, b, normals.shape[-2:])
     if not guard > 0:
         raise ValueError(f"guard must be positive, got {guard!r}")
-    s_src = _shaded(normals, source, source_shadow, source_sun)
-    s_tgt = _shaded(normals, target, target_shadow, target_sun)
+    s_src = _shaded(normals, source, source_shadow, source_sun, sun_cosine)
+    s_tgt = _shaded(normals, target, target_shadow, target_sun, sun_cosine)
     if mask is None:
         mean = s_src.mean((2, 3), keepdim=True)
     else:
@@ -97,9 +108,10 @@ def quotient_ratio(normals: torch.Tensor, source: torch.Tensor, target: torch.Te
 def quotient_relight(image: torch.Tensor, normals: torch.Tensor, source: torch.Tensor, target: torch.Tensor,
                      mask: torch.Tensor | None = None, source_shadow: torch.Tensor | None = None,
                      target_shadow: torch.Tensor | None = None, guard: float = DEFAULT_GUARD, *,
-                     source_sun: torch.Tensor | None = None, target_sun: torch.Tensor | None = None) -> torch.Tensor:
+                     source_sun: torch.Tensor | None = None, target_sun: torch.Tensor | None = None,
+                     sun_cosine: bool = False) -> torch.Tensor:
     """``(B, 3, H, W)`` the photo relit by :func:`quotient_ratio` (``image * ratio``)."""
     if image.shape != normals.shape:
         raise ValueError(f"image {tuple(image.shape)} and normals {tuple(normals.shape)} must have the same shape")
     return image * quotient_ratio(normals, source, target, mask, source_shadow, target_shadow, guard,
-                                  source_sun=source_sun, target_sun=target_sun)
+                                  source_sun=source_sun, target_sun=target_sun, sun_cosine=sun_cosine)

@@ -316,6 +316,36 @@ def project_sun(direction: Array, irradiance_rgb: Array, order: int = 2) -> Arra
     return restore(y[:, None] * e.to(y.dtype)[None, :])
 
 
+def sun_of(coeffs: Array) -> tuple[Array, Array]:
+    """The delta sun whose radiance SH (order >= 1) is ``coeffs``: the inverse of :func:`project_sun`.
+
+    For ``L(w) = E delta(w - s)`` the coefficients are ``E Y_lm(s)``: the DC term gives
+    ``E = c_00 / Y_00`` per colour, and band 1 (ordered y, z, x) points at ``s``; the direction is
+    read from the luminance-weighted band 1, so a coloured sun keeps one direction.
+
+    Args:
+        coeffs: ``(K, 3)`` or ``(B, K, 3)`` radiance SH of a sun alone, ``K >= 4``.
+
+    Returns:
+        ``direction`` ``(3,)`` / ``(B, 3)`` unit vector towards the sun (``(0, 0, 0)`` for an
+        all-zero input) and ``irradiance`` ``(3,)`` / ``(B, 3)`` on a surface facing it.
+    """
+    c, restore = to_tensor(coeffs, "coeffs")
+    check_finite(c, "coeffs")
+    batched = c.ndim == 3
+    if c.ndim not in (2, 3) or c.shape[-1] != 3 or c.shape[-2] < 4:
+        raise ValueError(f"coeffs must have shape (K, 3) or (B, K, 3) with K >= 4, got {tuple(c.shape)}")
+    c = c if batched else c[None]
+    lum = torch.tensor(_envmap.LUMINANCE, dtype=c.dtype, device=c.device)
+    y1 = c[:, 1:4] @ lum  # (B, 3): y, z, x
+    d = torch.stack([y1[:, 2], y1[:, 0], y1[:, 1]], -1)
+    d = d / d.norm(dim=-1, keepdim=True).clamp_min(torch.finfo(c.dtype).tiny)
+    e = c[:, 0] / (0.5 / math.sqrt(math.pi))
+    if not batched:
+        d, e = d[0], e[0]
+    return restore(d), restore(e)
+
+
 # ------------------------------------------------------------------- rotation
 
 

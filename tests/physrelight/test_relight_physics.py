@@ -119,3 +119,62 @@ def test_08_exposure_values_are_checked(bad) -> None:
     with pytest.raises(ValueError, match="exposure"):
         exposure.parse_exposure(bad)
     assert exposure.parse_exposure(" AUTO ") == "auto" and exposure.parse_exposure("+1.5") == 1.5
+
+
+def test_sun_of_inverts_project_sun_and_sun_shading_is_the_exact_clamped_cosine() -> None:
+    """``sh.sun_of(project_sun(s, E)) == (s, E)`` (1e-6); ``image_model.sun_shading`` equals
+    ``E max(0, n . s) / pi`` computed by hand, and the order-2 SH shading of the same sun is its
+    band-limited version: within 0.1 E/pi of it everywhere (the known ringing) but not equal."""
+    import math
+
+    from physrelight import image_model, sh
+
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        s = rng.normal(size=3)
+        s /= np.linalg.norm(s)
+        e = rng.uniform(0.5, 3.0, 3)
+        d, e2 = sh.sun_of(sh.project_sun(s, e))
+        np.testing.assert_allclose(d, s, atol=1e-6)
+        np.testing.assert_allclose(e2, e, rtol=1e-6)
+    n = torch.nn.functional.normalize(torch.randn(1, 3, 16, 16, generator=torch.Generator().manual_seed(1),
+                                                  dtype=torch.float64), dim=1)
+    n[..., :2, :] = 0.0  # no surface
+    sun = torch.from_numpy(sh.project_sun(s, e))
+    got = image_model.sun_shading(n, sun)
+    cos = (n * torch.from_numpy(s)[None, :, None, None]).sum(1, keepdim=True).clamp_min(0)
+    torch.testing.assert_close(got, cos * torch.from_numpy(e)[None, :, None, None] / math.pi)
+    assert float(got[..., :2, :].abs().max()) == 0.0
+    band_limited = image_model.shading(n, sun)
+    gap = (band_limited - got)[..., 2:, :].abs() / torch.from_numpy(e / math.pi)[None, :, None, None]
+    assert 0.01 < float(gap.max()) < 0.1
+
+
+def test_quotient_with_the_sun_exact_returns_the_photo_at_its_own_lighting_and_is_scale_free() -> None:
+    """With ``sun_cosine`` the quotient still gives the photo back bit for bit when relit to its own
+    lighting (with or without its shadow), is invariant to the albedo/lighting scale, and a lighting
+    without a sun (zero sun SH) gives exactly the plain quotient."""
+    from physrelight import sh
+
+    g = torch.Generator().manual_seed(3)
+    photo = torch.rand(1, 3, 12, 12, generator=g)
+    n = torch.nn.functional.normalize(torch.randn(1, 3, 12, 12, generator=g), dim=1)
+    sun = torch.from_numpy(sh.project_sun(np.array([0.3, 0.8, 0.52]) / np.linalg.norm([0.3, 0.8, 0.52]),
+                                          np.array([2.0, 1.8, 1.5]))).float()[None]
+    L = sun + torch.rand(1, 9, 3, generator=g) * 0.2
+    L[:, 0] += 0.5
+    v = (torch.rand(1, 1, 12, 12, generator=g) > 0.3).float()
+    assert torch.equal(quotient.quotient_relight(photo, n, L, L, source_sun=sun, target_sun=sun, sun_cosine=True),
+                       photo)
+    assert torch.equal(quotient.quotient_relight(photo, n, L, L, source_shadow=v, target_shadow=v, source_sun=sun,
+                                                 target_sun=sun, sun_cosine=True), photo)
+    Lt = torch.rand(1, 9, 3, generator=g) * 0.3
+    Lt[:, 0] += 0.6
+    a = quotient.quotient_relight(photo, n, L, Lt + sun, source_sun=sun, target_sun=sun, sun_cosine=True)
+    b = quotient.quotient_relight(photo, n, 3 * L, 3 * (Lt + sun), source_sun=3 * sun, target_sun=3 * sun,
+                                  sun_cosine=True)
+    torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7)
+    zero = torch.zeros_like(sun)
+    torch.testing.assert_close(quotient.quotient_relight(photo, n, L, Lt, source_sun=zero, target_sun=zero,
+                                                         sun_cosine=True),
+                               quotient.quotient_relight(photo, n, L, Lt), rtol=1e-6, atol=1e-7)

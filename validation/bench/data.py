@@ -93,6 +93,9 @@ class BenchView:
             sun), so the sky's part is ``sh - sun_sh``.
         photo: per lighting ``(H, W, 3)`` float32 display values in [0, 1] (the LDR photo).
         photo_params: per lighting the :class:`synth.photo.PhotoParams` record (dict).
+        K: ``(3, 3)`` the camera's intrinsics (pixel grid of the images), or None.
+        depth: ``(H, W)`` true z-depth at the pixel centres (0 on sky), or None; only the
+            oracle-depth diagnostics read it.
         physical: ``() -> (SceneSpec, Camera, [Lighting])`` for the analysis-by-synthesis
             baseline (Mitsuba objects, built on demand), or None.
     """
@@ -113,6 +116,8 @@ class BenchView:
     photo: list[np.ndarray]
     photo_params: list[dict[str, Any]]
     physical: Callable[[], tuple[Any, Any, list[Any]]] | None = field(default=None, repr=False)
+    K: np.ndarray | None = None
+    depth: np.ndarray | None = None
 
     @property
     def name(self) -> str:
@@ -176,7 +181,7 @@ def load_dataset(root: str | Path, max_scenes: int | None = None, with_physical:
         lights = [light_info(l["kind"], l["sun_direction"], np.asarray(l["sh"]["world"]["2"])) for l in rec["lights"]]
         physical = _dataset_physical(ds.config, int(rec["index"])) if with_physical else None
         for v in range(len(rec["views"])):
-            geo = ds.load(scene, v, None, keys=("albedo", "normal", "sky_mask", "glossy_mask"))
+            geo = ds.load(scene, v, None, keys=("albedo", "normal", "sky_mask", "glossy_mask", "depth", "K"))
             per = [ds.load(scene, v, l, keys=("radiance", "shadow", "direct_shadow", "photo", "photo_params", "sh"))
                    for l in range(n_light)]
             views.append(BenchView(
@@ -189,7 +194,8 @@ def load_dataset(root: str | Path, max_scenes: int | None = None, with_physical:
                         for l in rec["lights"]],
                 photo=[np.clip(p["photo"], 0, 1) for p in per],
                 photo_params=[p["photo_params"] for p in per],
-                physical=(lambda v=v, physical=physical: _pick_view(physical(), v)) if physical else None))
+                physical=(lambda v=v, physical=physical: _pick_view(physical(), v)) if physical else None,
+                K=np.asarray(geo["K"], dtype=np.float64), depth=_single(geo["depth"]).astype(np.float32)))
     return views
 
 
@@ -344,7 +350,8 @@ def render_recipe(recipe: Recipe, res: int = 64, spp: int = 32, env_res: int = 3
             shadow=[p["shadow"] for p in per[vi]], direct_shadow=[p["direct_shadow"] for p in per[vi]],
             sun_sh=[p["sun_sh"] for p in per[vi]], photo=[p["photo"] for p in per[vi]],
             photo_params=[p["params"] for p in per[vi]],
-            physical=lambda cam=cam: (spec, cam, lights)))
+            physical=lambda cam=cam: (spec, cam, lights), K=np.asarray(cam.K, dtype=np.float64),
+            depth=np.asarray(g.depth, dtype=np.float32)))
     return out
 
 
