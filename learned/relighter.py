@@ -36,9 +36,10 @@ from . import checkpoint as ckpt
 from .lighting import WEIGHTS_DIR, load_prior
 from .networks import InverseNet, ShadowNet, repair_top_rows
 from .objectives import decompose_and_solve
+from .source_lighting import SourceLightingConfig, solve_source_lighting
 
-__all__ = ["DEFAULT_FOV_DEG", "RELIGHT_METHODS", "SKY_SOURCES", "SKY_TYPES", "WEIGHT_FILES", "Relighter", "dc_luminance",
-           "estimate_pitch", "exposure_scale", "fill_weights_folder", "match_exposure", "rotate_azimuth", "sky_map_kind",
+__all__ = ["DEFAULT_FOV_DEG", "LIGHTING_ESTIMATORS", "RELIGHT_METHODS", "SKY_SOURCES", "SKY_TYPES", "WEIGHT_FILES", "Relighter", "dc_luminance",
+           "envmap_sun", "estimate_pitch", "exposure_scale", "fill_weights_folder", "match_exposure", "rotate_azimuth", "sky_map_kind",
            "sun_lighting", "sun_sky_map", "target_sky", "transfer_to_full_resolution", "working_resolution"]
 
 
@@ -47,6 +48,8 @@ SUN_RADIUS_DEG = 0.27
 DEFAULT_FOV_DEG = 60.0
 """A photo's horizontal field of view when nothing says otherwise (no EXIF focal length, no ``--fov``)."""
 SKY_SOURCES = ("target", "gan", "keep")
+LIGHTING_ESTIMATORS = ("network", "source_map")
+"""The source-lighting steps of :meth:`Relighter.decompose_linear`."""
 HORIZON_Y = 0.02
 """A sun target's sky is looked up no lower than this (the sine of about 1 degree of elevation)."""
 
@@ -146,18 +149,28 @@ class Relighter:
 
     def __init__(self, inverse: InverseNet, shadow_net: ShadowNet, prior: LightingPrior, res: int = 64,
                  renderer: torch.nn.Module | None = None, sky_segmenter: torch.nn.Module | None = None,
-                 sky_generator: torch.nn.Module | None = None) -> None:
+                 sky_generator: torch.nn.Module | None = None, lighting_estimator: str = "source_map",
+                 source_config: SourceLightingConfig | None = None) -> None:
+        if lighting_estimator not in LIGHTING_ESTIMATORS:
+            raise ValueError(f"lighting_estimator must be one of {LIGHTING_ESTIMATORS}, got {lighting_estimator!r}")
         self.inverse, self.shadow_net, self.prior, self.res = inverse.eval(), shadow_net.eval(), prior, res
+        # "source_map" (default since issue 26): learned.source_lighting (MAP in the prior's subspace, robust
+        # weights, the sky's pixels when K is given; each a switch of source_config); "network": the
+        # lighting step exported with the inverse network (map_relative), the figures before.
+        self.lighting_estimator = lighting_estimator
+        self.source_config = source_config if source_config is not None else SourceLightingConfig()
         self.renderer = renderer.eval() if renderer is not None else None
         self.sky_segmenter = sky_segmenter.eval() if sky_segmenter is not None else None
         self.sky_generator = sky_generator.eval() if sky_generator is not None else None
 
     @classmethod
-    def load(cls, path: str | os.PathLike | None = None, renderer: str | os.PathLike | None = None) -> "Relighter":
+    def load(cls, path: str | os.PathLike | None = None, renderer: str | os.PathLike | None = None,
+             lighting_estimator: str = "source_map", source_config: SourceLightingConfig | None = None) -> "Relighter":
         """Load ``inverse.safetensors``, ``shadow.safetensors``, ``lighting_prior.npz`` and, when
         present, ``renderer.safetensors``, ``sky_segmentation.safetensors`` and
         ``sky_gan.safetensors`` from ``path`` (a folder; None = the weights shipped in the
-        package). ``renderer`` names another renderer weights file."""
+        package). ``renderer`` names another renderer weights file; ``lighting_estimator`` and
+        ``source_config`` pick the source-lighting step (see :class:`Relighter`)."""
         d = Path(path) if path is not None else WEIGHTS_DIR
         if not d.is_dir():
             raise FileNotFoundError(f"no weights folder at {str(d)!r}")
@@ -185,18 +198,26 @@ class Relighter:
 
             generator = load_sky_generator(d / "sky_gan.safetensors")
         return cls(inverse, shadow, load_prior(d / "lighting_prior.npz"), int(inv_m.get("res", 64)), neural,
-                   segmenter, generator)
+                   segmenter, generator, lighting_estimator, source_config)
 
     @torch.no_grad()
-    def decompose_linear(self, image: torch.Tensor, sky: torch.Tensor) -> dict[str, torch.Tensor]:
+    def decompose_linear(self, image: torch.Tensor, sky: torch.Tensor,
+                         K: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """Tensors in, tensors out: ``image (B, 3, H, W)`` linear, ``sky (B, 1, H, W)`` bool ->
         ``albedo, normals, shadow, lighting (B, 9, 3), lighting_solved, foreground``.
+
+        ``K``: ``(3, 3)`` or ``(B, 3, 3)`` intrinsics of ``image``'s pixel grid, or None; read only by
+        the ``"source_map"`` estimator's sky term (:mod:`learned.source_lighting`).
 
         The layers' top two rows are repaired (:func:`learned.networks.repair_top_rows`: the band
         along the top of every layer) after the lighting is solved, from the layers as the network
         gives them: the shipped lighting step was trained with those rows as they are, and solving
         on repaired rows costs the quick synthetic bench 0.0025 l1."""
         out = decompose_and_solve(self.inverse, image, sky, self.prior)
+        if self.lighting_estimator == "source_map":
+            out["lighting"] = solve_source_lighting(image, out["albedo"], out["normals"], out["shadow"],
+                                                    out["foreground"], self.prior, sky=sky, K=K,
+                                                    config=self.source_config)
         out.update({k: repair_top_rows(out[k]) for k in ("albedo", "normals", "shadow")})
         return out
 
