@@ -205,11 +205,13 @@ def _train_sky_stage(args: argparse.Namespace) -> int:
                          res=args.res, batch=args.batch, steps=args.steps, lr=args.lr, lr_d=args.lr_d, seed=args.seed,
                          augment=not args.no_augment, val_every=args.val_every, val_images=args.val_images,
                          ckpt_every=args.ckpt_every, log_every=args.log_every, threads=args.threads, weights=weights,
-                         progress=not args.quiet)
+                         progress=not args.quiet, wide_augment=args.wide_augment, real_panoramas=args.real_panoramas,
+                         real_exclude=tuple(args.real_exclude or ()), real_fraction=args.real_fraction,
+                         real_views=args.real_views)
     result = train_sky(cfg)
     print(json.dumps(result, indent=1))
     if args.export:
-        path = export_sky(args.out, args.export)
+        path = export_sky(args.out, args.export, average=args.export_average)
         print(f"{args.stage}: -> {path} ({path.stat().st_size / 1e3:.0f} kB)")
     if args.evaluate:
         from . import checkpoint as ckpt
@@ -217,6 +219,10 @@ def _train_sky_stage(args: argparse.Namespace) -> int:
 
         model = build_sky_model(cfg)
         ckpt.load_checkpoint(ckpt.latest_checkpoint(args.out), model, restore_rng=False)
+        if args.export and args.export_average:  # measure what was exported: the averaged weights
+            from .sky_segmentation import load_sky_segmenter
+
+            model["seg"] = load_sky_segmenter(args.export)
         if args.stage == "sky":
             panel = Path(args.json).with_suffix(".png") if args.json else None
             metrics = sky_follows_lighting(model["g"], args.evaluate, split="all", res=cfg.res, panel=panel)
@@ -248,6 +254,19 @@ def _add_sky_stages(tsub: argparse._SubParsersAction) -> None:
         p.add_argument("--lr-d", type=float, default=2e-4, help="discriminator learning rate (sky; default: 2e-4)")
         p.add_argument("--seed", type=int, default=0)
         p.add_argument("--no-augment", action="store_true", help="segmentation: no photometric augmentation")
+        p.add_argument("--wide-augment", action="store_true",
+                       help="segmentation: the wider camera (+-2 EV, white balance, dusk tints, JPEG-like blocks; "
+                            "learned.sky_segmentation.WIDE_AUGMENT) and darkened dusk skies (dusk_sky)")
+        p.add_argument("--real-panoramas", default=None, metavar="DIR",
+                       help="segmentation: also train on random views of the real panoramas in DIR and their "
+                            "NAME_sky.png masks (e.g. physrelight/data/hdri; a held-out panorama is refused)")
+        p.add_argument("--real-exclude", action="append", metavar="NAME",
+                       help="segmentation: leave this panorama out, from the real views and from the synthetic "
+                            "photos it lights (repeatable; leave-one-panorama-out runs)")
+        p.add_argument("--real-fraction", type=float, default=0.5,
+                       help="segmentation: share of each batch taken from the real views (default: 0.5)")
+        p.add_argument("--real-views", type=positive_int, default=1024,
+                       help="segmentation: real views made once and drawn from (default: 1024)")
         p.add_argument("--val-every", type=positive_int, default=250)
         p.add_argument("--val-images", type=positive_int, default=96, help="validation photos")
         p.add_argument("--ckpt-every", type=positive_int, default=250)
@@ -256,6 +275,8 @@ def _add_sky_stages(tsub: argparse._SubParsersAction) -> None:
         p.add_argument("--loss-weight", action="append", metavar="NAME=VALUE",
                        help="sky: override a loss weight (gan, fm, lowres)")
         p.add_argument("--export", default=None, metavar="PATH", help="after training, export weights-only safetensors")
+        p.add_argument("--export-average", default=None, type=_step_range, metavar="FIRST:LAST",
+                       help="segmentation: export the mean of the checkpoints of steps FIRST..LAST")
         p.add_argument("--evaluate", default=None, metavar="DATA",
                        help="after training, held-out figures on DATA (all splits): sky IoU vs baselines, or "
                             "whether SkyGAN's sky follows the SH")

@@ -44,10 +44,10 @@ from .data import evenly_spread, load_photo
 from .discriminators import MultiscaleDiscriminator, feature_matching_loss, lsgan_loss
 from .networks import count_parameters
 from .sky_gan import LOG_EPS, SkyGenerator, condition_map, generate_sky, lighting_scale
-from .sky_segmentation import SkySegmenter, photometric_augment, segment_sky
+from .sky_segmentation import SkySegmenter, dusk_sky, photometric_augment, segment_sky
 from .runs import RunConfig, RunLogs, display
 
-__all__ = ["SkyTrainConfig", "SkyData", "evaluate_segmentation", "export_sky", "mirror_lighting",
+__all__ = ["RealCrops", "SkyTrainConfig", "SkyData", "evaluate_segmentation", "export_sky", "mirror_lighting",
            "sky_follows_lighting", "train_sky", "SKY_STAGES"]
 
 SKY_STAGES = ("sky", "segmentation")
@@ -79,6 +79,11 @@ class SkyTrainConfig(RunConfig):
     hidden: int = 16
     d_width: int = 16
     augment: bool = True
+    wide_augment: bool = False
+    real_panoramas: str | None = None
+    real_exclude: tuple[str, ...] = ()
+    real_fraction: float = 0.5
+    real_views: int = 1024
     val_every: int = 250
     val_images: int = 96
     ckpt_every: int = 250
@@ -95,6 +100,12 @@ class SkyTrainConfig(RunConfig):
                           ("lr", "lr_d"), SKY_LOSS_WEIGHTS)
         if self.res < 8:
             raise ValueError(f"res must be >= 8, got {self.res}")
+        self.real_exclude = tuple(self.real_exclude)
+        if self.real_panoramas is not None:
+            if self.stage != "segmentation":
+                raise ValueError("real panoramas train the segmenter only (stage 'segmentation')")
+            if not (isinstance(self.real_fraction, (int, float)) and 0.0 < self.real_fraction <= 1.0):
+                raise ValueError(f"real_fraction must be a number in (0, 1], got {self.real_fraction!r}")
         self.weights = {**SKY_LOSS_WEIGHTS, **self.weights}
 
 
@@ -118,6 +129,7 @@ class SkyData:
         lighting: also read the ground-truth SH (``mode="full"``; SkyGAN only).
         max_images: keep at most this many photos, evenly spread (None: all).
         progress: a progress bar while loading.
+        exclude_hdri: drop the photos lit by (and showing) these real panoramas (file stems).
 
     Attributes:
         image ``(N, 3, res, res)``, sky ``(N, 1, res, res)`` bool, lighting ``(N, 9, 3)``
@@ -125,9 +137,11 @@ class SkyData:
     """
 
     def __init__(self, root: str | Path, split: str, res: int, lighting: bool, max_images: int | None = None,
-                 progress: bool = False) -> None:
+                 progress: bool = False, exclude_hdri: tuple[str, ...] = ()) -> None:
         ds = SynthDataset(root, split=split, mode="full" if lighting else "self_supervised")
         items = ds.items
+        if exclude_hdri:  # leave-one-panorama-out: no photo whose background is a left-out panorama
+            items = [it for it in items if _hdri_name(Path(root), it.scene, it.light) not in exclude_hdri]
         if not items:
             raise ValueError(f"{str(root)!r} has no photos in split {split!r}")
         items = evenly_spread(items, max_images)
@@ -161,6 +175,101 @@ class SkyData:
             sky[mirror] = sky[mirror].flip(-1)
             light[mirror] = mirror_lighting(light[mirror])
         return image, sky, light
+
+
+def _hdri_name(root: Path, scene: str, light: int) -> str | None:
+    """The real panorama (file stem) lighting ``scene``'s lighting ``light``, or None for a sky model."""
+    import json
+
+    path = root / scene / "lights" / f"light_{light:02d}" / "lighting.json"
+    if not path.is_file():
+        return None
+    return json.loads(path.read_text()).get("params", {}).get("hdri")
+
+
+REAL_PITCH_RANGE = (-15.0, 30.0)
+REAL_FOV_RANGE = (40.0, 80.0)
+REAL_LOW_RES = (0.4, 0.9)
+
+
+class RealCrops:
+    """Random pinhole views of real HDR panoramas and their sky masks: real skies for the segmenter.
+
+    ``views`` views are made once (a bank; a pure function of ``seed``): each draws a panorama
+    in turn, a level camera with yaw ``U(0, 360)``, pitch ``U(-15, 30)`` and horizontal field of view
+    ``U(40, 80)`` degrees (:data:`REAL_PITCH_RANGE`, :data:`REAL_FOV_RANGE`), is looked up at
+    ``res x res`` (2 x 2 rays per pixel) and metered like a camera (log-average luminance to 0.18,
+    :func:`synth.photo.metered_ev`); half of the views are looked up smaller (``U(0.4, 0.9) res``)
+    and brought back bilinearly: small, soft photos too. The sky is the view of the panorama's
+    sky mask (coverage > 1/2), as ``bench --real`` makes it. :meth:`batch` draws from the bank
+    (half of them mirrored); the caller's photometric augmentation makes every draw another photo.
+
+    Args:
+        folder: a folder of lat-long ``.exr`` panoramas with their ``NAME_sky.png`` masks.
+        res: the views' size.
+        exclude: panorama names (file stems) left out (leave-one-panorama-out runs).
+        views: the bank's size.
+        seed: the bank's cameras.
+
+    Raises:
+        ValueError: no panorama left, or one of them is a held-out panorama (never trained on).
+    """
+
+    def __init__(self, folder: str | Path, res: int, exclude: tuple[str, ...] = (), views: int = 1024,
+                 seed: int = 0) -> None:
+        from synth.panorama_crops import HELDOUT_DIR, load_panorama
+
+        d = Path(folder)
+        if not d.is_dir():
+            raise ValueError(f"real panorama folder {str(d)!r} does not exist")
+        if isinstance(views, bool) or not isinstance(views, int) or views < 1:
+            raise ValueError(f"views must be a positive integer, got {views!r}")
+        held = {p.stem for p in HELDOUT_DIR.glob("*.exr")}
+        paths = sorted(p for p in d.glob("*.exr") if p.stem not in exclude)
+        bad = [p.name for p in paths if p.stem in held or p.resolve().parent == HELDOUT_DIR.resolve()]
+        if bad:
+            raise ValueError(f"{bad} are held-out panoramas: they are scored, never trained on")
+        if not paths:
+            raise ValueError(f"no .exr panorama left in {str(d)!r} (excluded: {list(exclude)})")
+        self.panoramas = [load_panorama(p, "training") for p in paths]
+        self.res = res
+        rng = np.random.default_rng([seed, 11])
+        bank = [self.view(self.panoramas[k % len(self.panoramas)], rng) for k in range(views)]
+        # float16 keeps the bank small; the metered radiance is far below its range
+        self.image = torch.stack([b[0] for b in bank]).half()
+        self.sky = torch.stack([b[1] for b in bank])
+
+    def __len__(self) -> int:
+        return self.image.shape[0]
+
+    def view(self, pano: Any, rng: np.random.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+        """One random view of ``pano``: linear photo ``(3, res, res)`` (metered) and sky ``(1, res, res)`` bool."""
+        from physrelight import panorama
+        from synth.photo import metered_ev
+
+        yaw, pitch = float(rng.uniform(0.0, 360.0)), float(rng.uniform(*REAL_PITCH_RANGE))
+        fov = float(rng.uniform(*REAL_FOV_RANGE))
+        n = self.res if rng.random() < 0.5 else max(8, round(self.res * float(rng.uniform(*REAL_LOW_RES))))
+        K = panorama.view_intrinsics(fov, n, n)
+        rays = panorama.camera_rays(K, panorama.level_camera(yaw, pitch), n, n, 2).to(torch.float32)
+        rad = panorama.look_up(torch.from_numpy(pano.env), rays)
+        cover = panorama.look_up(torch.from_numpy(pano.sky.astype(np.float32))[..., None], rays)[..., 0]
+        image = rad.permute(2, 0, 1) * 2.0 ** metered_ev(rad.numpy())
+        sky = cover[None]
+        if n != self.res:
+            image = F.interpolate(image[None], size=(self.res, self.res), mode="bilinear", align_corners=False)[0]
+            sky = F.interpolate(sky[None], size=(self.res, self.res), mode="bilinear", align_corners=False)[0]
+        return image.float(), sky > 0.5
+
+    def batch(self, size: int, seed: int, step: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """``size`` views of ``(seed, step)``: ``(size, 3, res, res)`` linear, ``(size, 1, res, res)`` bool."""
+        rng = np.random.default_rng([seed, step, 13])
+        idx = torch.from_numpy(rng.integers(len(self), size=size))
+        image, sky = self.image[idx].float(), self.sky[idx].clone()
+        mirror = torch.from_numpy(rng.random(size) < 0.5)
+        image[mirror] = image[mirror].flip(-1)
+        sky[mirror] = sky[mirror].flip(-1)
+        return image, sky
 
 
 def _step_generator(seed: int, step: int, salt: int) -> torch.Generator:
@@ -253,9 +362,13 @@ def train_sky(config: SkyTrainConfig) -> dict[str, Any]:
         return {"step": start, "train_seconds": seconds}
 
     lighting = config.stage == "sky"
-    data = SkyData(config.data, config.train_split, config.res, lighting, progress=config.progress)
+    data = SkyData(config.data, config.train_split, config.res, lighting, progress=config.progress,
+                   exclude_hdri=config.real_exclude)
     val = SkyData(config.val_data or config.data, config.val_split, config.res, lighting,
                   max_images=config.val_images)
+    real = (RealCrops(config.real_panoramas, config.res, config.real_exclude, config.real_views, config.seed)
+            if config.real_panoramas else None)
+    n_real = 0 if real is None else max(1, round(config.batch * config.real_fraction))
     logs = RunLogs(run, start, True)
     if start == 0:
         io.write_json(run / "config.json", {**asdict(config), "parameters": {k: count_parameters(m) for k, m in
@@ -268,7 +381,12 @@ def train_sky(config: SkyTrainConfig) -> dict[str, Any]:
     model.train()
     for step in range(start, config.steps):
         t0 = time.perf_counter()
-        image, sky, light = data.batch(config.batch, config.seed, step)
+        if n_real:  # the real views replace part of the synthetic batch
+            image, sky, light = data.batch(config.batch - n_real, config.seed, step)
+            real_image, real_sky = real.batch(n_real, config.seed, step)
+            image, sky = torch.cat([image, real_image]), torch.cat([sky, real_sky])
+        else:
+            image, sky, light = data.batch(config.batch, config.seed, step)
         if config.stage == "sky":
             z, noise = _noise(model, *image.shape[:1], *image.shape[-2:], _step_generator(config.seed, step, 1))
             losses = sky_gan_losses(model, image, sky, light, z, noise, config.weights)
@@ -286,7 +404,9 @@ def train_sky(config: SkyTrainConfig) -> dict[str, Any]:
             shown = terms["g"]
         else:
             if config.augment:
-                image = photometric_augment(image, _step_generator(config.seed, step, 2))
+                if config.wide_augment:
+                    image = dusk_sky(image, sky, _step_generator(config.seed, step, 3))
+                image = photometric_augment(image, _step_generator(config.seed, step, 2), wide=config.wide_augment)
             logits = model["seg"](image)
             loss = F.binary_cross_entropy_with_logits(logits, sky.float())
             opt["seg"].zero_grad(set_to_none=True)
@@ -370,11 +490,14 @@ def _gan_panel(path: Path, columns: list[torch.Tensor]) -> None:
 # ------------------------------------------------------------------------- export
 
 
-def export_sky(run: str | Path, dest: str | Path) -> Path:
+def export_sky(run: str | Path, dest: str | Path, average: tuple[int, int] | None = None) -> Path:
     """Export the latest checkpoint of a ``sky`` or ``segmentation`` run to ``dest`` (weights only).
 
     For SkyGAN only the generator is written (``g.*`` tensors, kind ``"sky_gan"``): the
-    discriminator is needed for training only. The segmenter is kind ``"sky_segmentation"``.
+    discriminator is needed for training only. The segmenter is kind ``"sky_segmentation"``;
+    with ``average = (first, last)`` it is the uniform mean of the run's checkpoints of steps
+    ``first..last`` (:func:`learned.checkpoint.export_weights`; the segmenter has no running
+    statistics), which smooths the step-to-step wander of a run without a learning-rate schedule.
     """
     import json
 
@@ -383,8 +506,13 @@ def export_sky(run: str | Path, dest: str | Path) -> Path:
         raise ValueError(f"no checkpoint in {str(run)!r}")
     meta = json.loads(side.read_text())
     cfg = meta["config"]
+    if average is not None and cfg.get("stage") != "segmentation":
+        raise ValueError("averaged exports are for the segmenter only")
     if cfg.get("stage") == "segmentation":
-        return ckpt.export_weights(side, dest, "sky_segmentation")
+        if average is None:
+            return ckpt.export_weights(side, dest, "sky_segmentation")
+        sides = ckpt.checkpoints_between(run, *average)
+        return ckpt.export_weights(sides[-1], dest, "sky_segmentation", average=sides)
     if cfg.get("stage") != "sky":
         raise ValueError(f"{str(run)!r} is not a sky or segmentation run")
     return ckpt.export_weights(side, dest, "sky_gan", submodule="g", strip_submodule=False)
