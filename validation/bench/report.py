@@ -248,8 +248,8 @@ def markdown(report: dict[str, Any], chart_paths: list[tuple[str, str]]) -> str:
     lines += ["", "All metrics, all cross-relighting pairs, by lighting track (*estimated*: only the target lighting "
               "is given, its level from the given source; *known*: the photo's own lighting is given too; *oracle*: "
               "ground-truth albedo and normals). The last three columns are exposure-invariant: l1, SSIM and PSNR "
-              "after the output's best single gain per image (least squares against the target's linear radiance "
-              "on the foreground), i.e. structure apart from level:", "",
+              "after the output's best single gain per image (the gain minimising its foreground l1, searched "
+              "from the least-squares gain in linear radiance), i.e. structure apart from level:", "",
               "| track | method | " + " | ".join(LABELS[k] for k in LABELS)
               + " | s / image | l1 at best gain | SSIM at best gain | PSNR at best gain |",
               "| --- | --- |" + " ---: |" * 10]
