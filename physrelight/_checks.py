@@ -118,3 +118,16 @@ def check_rotation(R: torch.Tensor, name: str = "R", atol: float = 1e-4) -> None
     det = torch.linalg.det(Rd)
     if bool((det < 0).any()):
         raise ValueError(f"{name} must be a proper rotation (det +1), got a reflection (det -1)")
+
+
+def batched_intrinsics(K: Array, batch: int, like: torch.Tensor) -> torch.Tensor:
+    """``K`` ``(3, 3)`` or ``(batch, 3, 3)`` -> ``(batch, 3, 3)`` in ``like``'s dtype and device,
+    finite with positive ``fx``, ``fy``; ``ValueError`` naming the bad shape or value otherwise."""
+    K = torch.as_tensor(K, dtype=like.dtype, device=like.device)
+    if K.shape == (3, 3):
+        K = K[None].expand(batch, 3, 3)
+    if K.shape != (batch, 3, 3):
+        raise ValueError(f"K must have shape (3, 3) or ({batch}, 3, 3), got {tuple(K.shape)}")
+    if not torch.isfinite(K).all() or bool((K[:, 0, 0] <= 0).any()) or bool((K[:, 1, 1] <= 0).any()):
+        raise ValueError("K must be finite with positive fx, fy")
+    return K

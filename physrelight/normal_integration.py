@@ -28,6 +28,8 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from physrelight._checks import batched_intrinsics
+
 __all__ = ["depth_from_normals", "log_depth_gradients"]
 
 
@@ -37,13 +39,7 @@ def _check(normals: torch.Tensor, K: torch.Tensor, mask: torch.Tensor | None) ->
     b, _, h, w = normals.shape
     if h < 2 or w < 2:
         raise ValueError(f"normals must be at least 2 x 2 pixels, got shape {tuple(normals.shape)}")
-    K = torch.as_tensor(K, dtype=normals.dtype, device=normals.device)
-    if K.shape == (3, 3):
-        K = K[None].expand(b, 3, 3)
-    if K.shape != (b, 3, 3):
-        raise ValueError(f"K must have shape (3, 3) or ({b}, 3, 3), got {tuple(K.shape)}")
-    if not torch.isfinite(K).all() or bool((K[:, 0, 0] <= 0).any()) or bool((K[:, 1, 1] <= 0).any()):
-        raise ValueError("K must be finite with positive fx, fy")
+    K = batched_intrinsics(K, b, normals)
     if bool((K[:, 0, 1] != 0).any()):
         raise ValueError("K must have zero skew")
     if mask is None:

@@ -38,6 +38,8 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from physrelight._checks import batched_intrinsics
+
 __all__ = ["DEFAULT_STEPS", "DEFAULT_THICKNESS", "sun_visibility"]
 
 DEFAULT_STEPS = 64
@@ -56,13 +58,7 @@ def _check_inputs(depth: torch.Tensor, K: torch.Tensor, sun_direction: torch.Ten
         raise ValueError(f"depth must be non-empty, got shape {tuple(depth.shape)}")
     if not depth.is_floating_point():
         raise ValueError(f"depth must be floating point, got {depth.dtype}")
-    K = torch.as_tensor(K, dtype=depth.dtype, device=depth.device)
-    if K.shape == (3, 3):
-        K = K[None].expand(b, 3, 3)
-    if K.shape != (b, 3, 3):
-        raise ValueError(f"K must have shape (3, 3) or ({b}, 3, 3), got {tuple(K.shape)}")
-    if not torch.isfinite(K).all() or bool((K[:, 0, 0] <= 0).any()) or bool((K[:, 1, 1] <= 0).any()):
-        raise ValueError("K must be finite with positive fx, fy")
+    K = batched_intrinsics(K, b, depth)
     last = torch.tensor([0.0, 0.0, 1.0], dtype=K.dtype, device=K.device)
     if not torch.allclose(K[:, 2], last.expand(b, 3)):
         raise ValueError(f"K's last row must be (0, 0, 1), got {K[:, 2].tolist()}")
