@@ -584,9 +584,8 @@ class Relighter:
             reuse["camera"] = (K, T)
         sky = reuse["sky"]
         K, T = reuse["camera"]
-        target_cam = self.target_lighting(rotate_azimuth(target, azimuth_deg) if azimuth_deg else target, T,
-                                          sky_type).float()
         turned = rotate_azimuth(target, azimuth_deg) if azimuth_deg else target
+        target_cam = self.target_lighting(turned, T, sky_type).float()
         suns: dict[str, torch.Tensor | None] = {"target_sun": self.target_sun(turned, T, sky_type)}
         source_cam = None
         if source is not None:

@@ -122,11 +122,9 @@ def camera_directions(K: torch.Tensor, height: int, width: int) -> torch.Tensor:
         raise ValueError(f"K must be a finite (3, 3) matrix, got shape {tuple(K.shape)}")
     if not (float(K[0, 0]) > 0 and float(K[1, 1]) > 0):
         raise ValueError(f"K must have positive focal lengths, got fx={float(K[0, 0])}, fy={float(K[1, 1])}")
-    v, u = torch.meshgrid(torch.arange(height, dtype=torch.float64) + 0.5,
-                          torch.arange(width, dtype=torch.float64) + 0.5, indexing="ij")
-    uv1 = torch.stack([u, v, torch.ones_like(u)], dim=-1) @ torch.linalg.inv(K).T  # x right, y down, z forward
-    d = uv1 * torch.tensor([1.0, -1.0, -1.0], dtype=torch.float64)
-    return d / d.norm(dim=-1, keepdim=True)
+    from physrelight.panorama import camera_rays
+
+    return camera_rays(K, torch.eye(3, dtype=torch.float64), height, width, 1)[..., 0, :]
 
 
 def sky_observations(image: torch.Tensor, sky: torch.Tensor, K: torch.Tensor, clip_level: float = 0.95,

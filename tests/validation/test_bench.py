@@ -122,26 +122,39 @@ def test_03_bench_md_has_the_tables_verdicts_and_charts(quick: Path) -> None:
         assert (quick / link).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", link
 
 
-def test_04_oracle_with_true_shading_and_shadow_is_the_image_model_and_units_follow_the_photo() -> None:
-    from validation.bench import data, methods, protocols
+def _toy_view(h: int, w: int, **fields):
+    """A two-lighting toy view: camera-facing normals, the top 3 rows sky, albedo 0.5, overcast SH
+    ``np.eye(9, 3)``, black radiance, no shadow, no sun, a grey photo; ``fields`` replace any of these."""
+    from validation.bench import data
 
-    h = w = 16
-    rng = np.random.default_rng(0)
     normal = np.zeros((h, w, 3), np.float32)
     normal[..., 2] = 1.0
     sky = np.zeros((h, w), bool)
     sky[:3] = True
     normal[sky] = 0
+    base = dict(scene="toy", view=0, group="quick", albedo=np.full((h, w, 3), 0.5, np.float32), normal=normal,
+                sky=sky, glossy=np.zeros((h, w), np.float32), sh=[np.eye(9, 3)] * 2,
+                radiance=[np.zeros((h, w, 3), np.float32)] * 2, shadow=[np.ones((h, w), np.float32)] * 2,
+                direct_shadow=[np.ones((h, w), np.float32)] * 2, sun_sh=[np.zeros((9, 3))] * 2,
+                photo=[np.full((h, w, 3), 0.5, np.float32)] * 2,
+                photo_params=[{"ev": 0.0, "wb_gains": [1.0, 1.0, 1.0]}] * 2)
+    base.update(fields)
+    base.setdefault("lights", [data.light_info("overcast", None, s) for s in base["sh"]])
+    return data.BenchView(**base)
+
+
+def test_04_oracle_with_true_shading_and_shadow_is_the_image_model_and_units_follow_the_photo() -> None:
+    from validation.bench import methods, protocols
+
+    h = w = 16
+    rng = np.random.default_rng(0)
     albedo = rng.uniform(0.2, 0.6, (h, w, 3)).astype(np.float32)
     sh = [np.zeros((9, 3)), np.zeros((9, 3))]
     sh[0][0], sh[1][0] = 1.0, 2.0
     sh[1][2] = 0.5  # light from the camera side (+z) brightens camera-facing surfaces
-    view = data.BenchView(
-        scene="toy", view=0, group="quick", albedo=albedo, normal=normal, sky=sky, glossy=np.zeros((h, w), np.float32),
-        lights=[data.light_info("overcast", None, s) for s in sh], sh=sh,
-        radiance=[np.zeros((h, w, 3), np.float32)] * 2, shadow=[np.ones((h, w), np.float32)] * 2,
-        direct_shadow=[np.full((h, w), 0.5, np.float32)] * 2, sun_sh=[np.zeros((9, 3))] * 2,
-        photo=[np.full((h, w, 3), 0.5, np.float32)] * 2, photo_params=[{"ev": 1.0, "wb_gains": [1.1, 1.0, 0.9]}] * 2)
+    view = _toy_view(h, w, albedo=albedo, sh=sh, direct_shadow=[np.full((h, w), 0.5, np.float32)] * 2,
+                     photo_params=[{"ev": 1.0, "wb_gains": [1.1, 1.0, 0.9]}] * 2)
+    sky, normal = view.sky, view.normal
     pair = protocols.cross_pairs([view])[0]
     assert (pair.source, pair.target) == (0, 1)
     np.testing.assert_allclose(pair.gain, [2.2, 2.0, 1.8])
@@ -224,22 +237,12 @@ def test_08_exposure_invariant_metrics_do_not_move_with_a_gain_and_never_lose_to
     """The bench's exposure-invariant display (``Pair.display_at_best_gain``) is the same image whatever
     gain the output carries (1e-6), its l1 is never above the l1 at gain 1, and an output that is the
     target times a constant scores l1 0 after the gain (up to the display's 8-bit-free rounding)."""
-    from validation.bench import data, protocols
+    from validation.bench import protocols
 
     h = w = 16
     rng = np.random.default_rng(3)
-    normal = np.zeros((h, w, 3), np.float32)
-    normal[..., 2] = 1.0
-    sky = np.zeros((h, w), bool)
-    sky[:3] = True
-    normal[sky] = 0
-    radiance = [rng.uniform(0.05, 0.6, (h, w, 3)).astype(np.float32) for _ in range(2)]
-    view = data.BenchView(
-        scene="toy", view=0, group="quick", albedo=np.full((h, w, 3), 0.5, np.float32), normal=normal, sky=sky,
-        glossy=np.zeros((h, w), np.float32), lights=[data.light_info("overcast", None, np.eye(9, 3))] * 2,
-        sh=[np.eye(9, 3)] * 2, radiance=radiance, shadow=[np.ones((h, w), np.float32)] * 2,
-        direct_shadow=[np.ones((h, w), np.float32)] * 2, sun_sh=[np.zeros((9, 3))] * 2,
-        photo=[np.full((h, w, 3), 0.5, np.float32)] * 2, photo_params=[{"ev": 0.5, "wb_gains": [1.0, 1.0, 1.0]}] * 2)
+    view = _toy_view(h, w, radiance=[rng.uniform(0.05, 0.6, (h, w, 3)).astype(np.float32) for _ in range(2)],
+                     photo_params=[{"ev": 0.5, "wb_gains": [1.0, 1.0, 1.0]}] * 2)
     pair = protocols.cross_pairs([view])[0]
     fg, tgt = pair.foreground(), pair.target_display()
     out = torch.from_numpy(rng.uniform(0.0, 1.0, (1, 3, h, w)).astype(np.float32))

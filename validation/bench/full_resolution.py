@@ -279,18 +279,6 @@ def native_scores(relighter: Any, root: str | Path, full_views: Sequence[BenchVi
     return out
 
 
-def _depths(root: Path, views: Sequence[BenchView]) -> dict[str, torch.Tensor]:
-    """``{view name: (1, 1, H, W)}`` ground-truth z-depth of each view (``depth.exr``)."""
-    from synth.dataset import SynthDataset
-
-    ds = SynthDataset(root, split="all", mode="full")
-    out = {}
-    for v in views:
-        d = ds.load(v.scene, v.view, None, keys=("depth",))["depth"]
-        out[v.name] = to_chw(d[..., 0] if d.ndim == 3 else d)
-    return out
-
-
 def _timed(fn: Callable[[], Any], threads: int = TIMING_THREADS) -> float:
     before = torch.get_num_threads()
     torch.set_num_threads(threads)
@@ -412,7 +400,6 @@ def run_full_resolution(data: str | Path, out_dir: str | Path, command: str, wor
         raise ValueError(f"{str(data)!r} is rendered at {size[1]}x{size[0]}: the study needs a square render at a "
                          f"multiple of the working resolution {working_res} above it (physrelight synth --res 256)")
     factor = size[0] // working_res
-    depths = _depths(Path(data), views)
     pairs, saturated = informative_pairs(cross_pairs(views))
     progress(f"full resolution: {len(pairs)} pairs of {len(views)} views at {size[0]} px, working at {working_res} px")
     before = torch.get_num_threads()
@@ -435,7 +422,7 @@ def run_full_resolution(data: str | Path, out_dir: str | Path, command: str, wor
                 outs = relight_variants(relighter, p.image(), p.sky(), p.target_lighting(), p.source_lighting(),
                                         method, working_res, decs[key])
                 records.append({"key": p.key, "scene": p.view.scene, "method": method,
-                                **score_variants(p, outs, depths[p.view.name], factor, k)})
+                                **score_variants(p, outs, to_chw(p.view.depth), factor, k)})
             p.release()
             if (i + 1) % 24 == 0 or i + 1 == len(pairs):
                 progress(f"  {i + 1}/{len(pairs)} pairs")

@@ -48,7 +48,7 @@ from .protocols import Pair
 
 LEARNED = ("proposed", "lambertian_sh", "shadownet_lambertian", "quotient")
 ORACLES = ("oracle_sh", "oracle_sh_shadow")
-ESTIMATED_TRACK = ("proposed", "lambertian_sh", "shadownet_lambertian", "quotient")
+ESTIMATED_TRACK = LEARNED
 """Only the target lighting is given (its level from the given source): the paper's setting, the headline."""
 KNOWN_TRACK = ("quotient_known",)
 """The photo's own lighting is given too (an environment map captured on set)."""
@@ -98,7 +98,7 @@ class OracleSH:
         albedo, normals, L = to_chw(v.albedo), to_chw(v.normal), pair.target_lighting()
         has_sun = bool(np.any(v.sun_sh[b]))
         if self.shadow == "true" and has_sun:
-            L_sun = torch.from_numpy((v.sun_sh[b] * pair.gain[None, :]).astype(np.float32))[None]
+            L_sun = pair.sun_lighting(b)
             shading = image_model.shading(normals, L - L_sun) + to_chw(v.shadow[b]) * image_model.shading(normals, L_sun)
             relit = albedo * shading
         else:
@@ -141,9 +141,7 @@ class Learned:
     @staticmethod
     def _suns(pair: Pair) -> dict[str, torch.Tensor]:
         """The sun's SH alone in the target and the source lighting, in the photo's units."""
-        def sun(i: int) -> torch.Tensor:
-            return torch.from_numpy((pair.view.sun_sh[i] * pair.gain[None, :]).astype(np.float32))[None]
-        return {"target_sun": sun(pair.target), "source_sun": sun(pair.source)}
+        return {"target_sun": pair.sun_lighting(pair.target), "source_sun": pair.sun_lighting(pair.source)}
 
 
 @dataclass

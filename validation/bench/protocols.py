@@ -92,6 +92,11 @@ class Pair:
         """``(1, 9, 3)`` float32 camera-frame SH of lighting ``index`` in this photo's linear units."""
         return torch.from_numpy((self.view.sh[index] * self.gain[None, :]).astype(np.float32))[None]
 
+    def sun_lighting(self, index: int) -> torch.Tensor:
+        """``(1, 9, 3)`` float32 camera-frame SH of lighting ``index``'s sun alone (zeros without one),
+        in this photo's linear units."""
+        return torch.from_numpy((self.view.sun_sh[index] * self.gain[None, :]).astype(np.float32))[None]
+
     def target_lighting(self) -> torch.Tensor:
         return self.lighting(self.target)
 
