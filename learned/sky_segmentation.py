@@ -258,11 +258,20 @@ COLOUR_MIN_BLUE_OVER_RED = 0.85
 segmenter was not kept, and under the shipped one the backdrop is refused at 0.85.)"""
 SMOOTHNESS_MAX_RATIO = 0.5
 MIN_SKY_FRACTION = 0.01
-BAND_WORKING_PIXELS = 2
+BAND_WORKING_PIXELS = 6
 """How far (in working pixels) from the upsampled boundary pixels are decided by colour
 (:func:`refine_sky_boundary`); 0: not at all. Chosen on the training side for the shipped segmenter
 (synthetic renders only). Study 22 found 0 better for its real-view segmenter, which was not kept
 (worse on data/val5 and on rocket.jpg, docs/experiments/22-sky-mask-real-views.md)."""
+
+
+REFINEMENTS = ("local", "gauss")
+"""How :func:`refine_sky_boundary` decides a band pixel: ``"local"``, the nearer of the two sides'
+local mean colours; ``"gauss"``, the likelier under each side's local diagonal Gaussian (mean and
+variance of log RGB)."""
+REFINEMENT = "gauss"
+VARIANCE_FLOOR = 1e-3
+"""Floor of a side's local variance of log RGB in ``"gauss"`` (about 3 % noise)."""
 
 
 def label_components(mask: torch.Tensor) -> torch.Tensor:
@@ -337,7 +346,8 @@ def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor
 
 def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int | None = SEGMENT_RES,
                              eps: float = 1e-2, threshold: float = 0.5,
-                             band: int = BAND_WORKING_PIXELS) -> tuple[torch.Tensor, list[str]]:
+                             band: int = BAND_WORKING_PIXELS,
+                             refine: str = REFINEMENT) -> tuple[torch.Tensor, list[str]]:
     """The sky of real photos at full resolution, and a reason per photo when there is none.
 
     The segmenter runs with its short side at ``res`` (:data:`SEGMENT_RES`); its mask keeps only a
@@ -368,6 +378,8 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
         raise ValueError(f"threshold must be a number in (0, 1), got {threshold!r}")
     if isinstance(band, bool) or not isinstance(band, int) or band < 0:
         raise ValueError(f"band must be an integer >= 0, got {band!r}")
+    if refine not in REFINEMENTS:
+        raise ValueError(f"refine must be one of {REFINEMENTS}, got {refine!r}")
     param = next(model.parameters())
     small = image.to(param.dtype) if res is None else resize_short_side(image.to(param.dtype), res)
     with torch.no_grad():
@@ -387,7 +399,7 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
             masks.append(up)
             continue
         width = max(1, band * round(image.shape[-2] / small.shape[-2]))
-        masks.append(refine_sky_boundary(up, image[b: b + 1], width))
+        masks.append(refine_sky_boundary(up, image[b: b + 1], width, refine))
     return torch.cat(masks), reasons
 
 
@@ -395,7 +407,7 @@ def _dilate(mask: torch.Tensor, r: int) -> torch.Tensor:
     return F.max_pool2d(mask.float(), 2 * r + 1, stride=1, padding=r) > 0.5
 
 
-def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int) -> torch.Tensor:
+def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refine: str = REFINEMENT) -> torch.Tensor:
     """Decide the pixels near a sky boundary by colour, at full resolution.
 
     A mask brought up from a working resolution is right away from its boundary and wrong
@@ -420,19 +432,27 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int) -> to
     sure_sky, sure_fg = (sky & ~near).to(x.dtype), (~sky & ~near).to(x.dtype)
     r = 4 * band
 
-    def local_mean(w: torch.Tensor) -> tuple[torch.Tensor, bool]:
-        """Mean colour of the sure pixels ``w`` near each pixel; where none is near, of all of them."""
+    def local_mean(w: torch.Tensor, v: torch.Tensor) -> tuple[torch.Tensor, bool]:
+        """Mean of ``v`` over the sure pixels ``w`` near each pixel; where none is near, over all of them."""
         total = float(w.sum())
         if total == 0:
-            return x, False
+            return v, False
         n = box_filter(w, r)
-        overall = (x * w).sum((2, 3), keepdim=True) / total
-        return torch.where(n > 0, box_filter(x * w, r) / n.clamp_min(1e-12), overall), True
+        overall = (v * w).sum((2, 3), keepdim=True) / total
+        return torch.where(n > 0, box_filter(v * w, r) / n.clamp_min(1e-12), overall), True
 
-    mu_sky, has_sky = local_mean(sure_sky)
-    mu_fg, has_fg = local_mean(sure_fg)
-    if not (has_sky and has_fg):
+    def distance(w: torch.Tensor) -> torch.Tensor | None:
+        mu, ok = local_mean(w, x)
+        if not ok:
+            return None
+        if refine == "local":
+            return ((x - mu) ** 2).sum(1, keepdim=True)
+        # "gauss": a diagonal Gaussian per side, so a smooth sky does not claim a varied foreground's
+        # outliers (negative log-likelihood, up to a constant)
+        var = (local_mean(w, x * x)[0] - mu * mu).clamp_min(0) + VARIANCE_FLOOR
+        return ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
+
+    d_sky, d_fg = distance(sure_sky), distance(sure_fg)
+    if d_sky is None or d_fg is None:
         return sky
-    d_sky = ((x - mu_sky) ** 2).sum(1, keepdim=True)
-    d_fg = ((x - mu_fg) ** 2).sum(1, keepdim=True)
     return torch.where(near, d_sky < d_fg, sky)
