@@ -223,3 +223,38 @@ def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, 
         assert rc == 2, err
     assert "\n" not in err and "error" in err and "Traceback" not in err
     assert list((tmp_path / "out").iterdir()) == []
+
+
+def test_04b_a_textured_foreground_keeps_its_outliers_against_a_smooth_sky() -> None:
+    """Foreground texels between the sky's colour and the foreground's mean but well inside the
+    foreground's spread (a pale leaf in a varied canopy): the Gaussian band ('gauss', the default)
+    keeps them foreground because the sky's variance is small; the nearest mean ('local') hands
+    them to the sky. Both keep the step horizon."""
+    from learned.sky_segmentation import refine_sky_boundary
+
+    H, W = 64, 96
+    g = torch.Generator().manual_seed(0)
+    sky_c = torch.tensor([0.3, 0.5, 0.9])
+    img = torch.ones(1, 3, H, W) * sky_c[None, :, None, None]
+    fg = torch.tensor([0.08, 0.12, 0.05])
+    # a canopy whose log colour varies by +-1 (a factor e) about its mean, every channel together
+    tex = torch.exp(torch.empty(1, 1, H - 30, W).uniform_(-1.0, 1.0, generator=g))
+    img[..., 30:, :] = fg[None, :, None, None] * tex
+    pale = torch.zeros(H, W, dtype=torch.bool)
+    pale[33:35, 10:90:6] = True  # pale texels: log colour nearer the sky's mean than the canopy's mean
+    img[0, :, pale] = (fg * torch.exp(torch.tensor(1.6)))[:, None].clamp(max=1.0) * torch.tensor([1.0, 1.4, 2.6])[:, None]
+    coarse = torch.zeros(1, 1, H, W, dtype=torch.bool)
+    coarse[..., :34, :] = True  # the working mask's horizon 4 px low
+    x = torch.log(img.clamp_min(1e-4))[0]
+    mu_sky, mu_fg = x[:, :20].mean((1, 2)), x[:, 40:].mean((1, 2))
+    d_sky = ((x[:, pale] - mu_sky[:, None]) ** 2).sum(0)
+    d_fg = ((x[:, pale] - mu_fg[:, None]) ** 2).sum(0)
+    assert bool((d_sky < d_fg).all())  # the case the nearest mean gets wrong
+    truth = torch.zeros(H, W, dtype=torch.bool)
+    truth[:30] = True
+    local = refine_sky_boundary(coarse, img, band=6, refine="local")[0, 0]
+    gauss = refine_sky_boundary(coarse, img, band=6, refine="gauss")[0, 0]
+    assert bool(local[pale].all())  # the old rule calls every pale texel sky
+    assert not bool(gauss[pale].any())
+    assert bool((gauss[:30] == truth[:30]).all())
+    assert float((gauss != truth).float().mean()) < float((local != truth).float().mean())
