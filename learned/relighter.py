@@ -30,7 +30,7 @@ import torch
 
 from physrelight import colour, image_model, sh
 from physrelight.lighting_prior import LightingPrior
-from physrelight.quotient import quotient_relight
+from physrelight.quotient import SMOOTH_RADIUS, quotient_relight
 
 from . import checkpoint as ckpt
 from .lighting import WEIGHTS_DIR, load_prior
@@ -150,7 +150,9 @@ class Relighter:
     def __init__(self, inverse: InverseNet, shadow_net: ShadowNet, prior: LightingPrior, res: int = 64,
                  renderer: torch.nn.Module | None = None, sky_segmenter: torch.nn.Module | None = None,
                  sky_generator: torch.nn.Module | None = None, lighting_estimator: str = "source_map",
-                 source_config: SourceLightingConfig | None = None) -> None:
+                 source_config: SourceLightingConfig | None = None, ratio_radius: int = SMOOTH_RADIUS) -> None:
+        if ratio_radius < 0 or int(ratio_radius) != ratio_radius:
+            raise ValueError(f"ratio_radius must be a non-negative integer, got {ratio_radius!r}")
         if lighting_estimator not in LIGHTING_ESTIMATORS:
             raise ValueError(f"lighting_estimator must be one of {LIGHTING_ESTIMATORS}, got {lighting_estimator!r}")
         self.inverse, self.shadow_net, self.prior, self.res = inverse.eval(), shadow_net.eval(), prior, res
@@ -162,15 +164,20 @@ class Relighter:
         self.renderer = renderer.eval() if renderer is not None else None
         self.sky_segmenter = sky_segmenter.eval() if sky_segmenter is not None else None
         self.sky_generator = sky_generator.eval() if sky_generator is not None else None
+        # The quotient methods' ratio is guided-filtered at this radius (px at the working resolution; 0 = raw
+        # ratio, the figures before study 27): physrelight.quotient.smooth_ratio.
+        self.ratio_radius = int(ratio_radius)
 
     @classmethod
     def load(cls, path: str | os.PathLike | None = None, renderer: str | os.PathLike | None = None,
-             lighting_estimator: str = "source_map", source_config: SourceLightingConfig | None = None) -> "Relighter":
+             lighting_estimator: str = "source_map", source_config: SourceLightingConfig | None = None,
+             ratio_radius: int = SMOOTH_RADIUS) -> "Relighter":
         """Load ``inverse.safetensors``, ``shadow.safetensors``, ``lighting_prior.npz`` and, when
         present, ``renderer.safetensors``, ``sky_segmentation.safetensors`` and
         ``sky_gan.safetensors`` from ``path`` (a folder; None = the weights shipped in the
         package). ``renderer`` names another renderer weights file; ``lighting_estimator`` and
-        ``source_config`` pick the source-lighting step (see :class:`Relighter`)."""
+        ``source_config`` pick the source-lighting step and ``ratio_radius`` the quotient ratio's guided
+        filter (see :class:`Relighter`)."""
         d = Path(path) if path is not None else WEIGHTS_DIR
         if not d.is_dir():
             raise FileNotFoundError(f"no weights folder at {str(d)!r}")
@@ -198,7 +205,7 @@ class Relighter:
 
             generator = load_sky_generator(d / "sky_gan.safetensors")
         return cls(inverse, shadow, load_prior(d / "lighting_prior.npz"), int(inv_m.get("res", 64)), neural,
-                   segmenter, generator, lighting_estimator, source_config)
+                   segmenter, generator, lighting_estimator, source_config, ratio_radius)
 
     @torch.no_grad()
     def decompose_linear(self, image: torch.Tensor, sky: torch.Tensor,
@@ -369,7 +376,8 @@ class Relighter:
                          else batch_sh(source_sun, "source_sun") * scale)
             relit = quotient_relight(image.float(), out["normals"], src, tgt, mask=~sky, source_shadow=src_shadow,
                                      target_shadow=s if method == "quotient_shadownet" else None,
-                                     source_sun=s_sun, target_sun=t_sun, sun_cosine=t_sun is not None)
+                                     source_sun=s_sun, target_sun=t_sun, sun_cosine=t_sun is not None,
+                                     smooth_radius=self.ratio_radius)
         elif method == "proposed" and self.renderer is not None:
             from .neural_renderer import render_relit
 

@@ -217,8 +217,11 @@ def test_06_bad_arguments_fail_with_one_line(tmp_path, capsys) -> None:
 # 0.11443 -> 0.10632, shadownet_lambertian 0.10844 -> 0.10395 (the estimator); quotient 0.10640 -> 0.10232
 # (both: the estimator alone, before 1d2777e, 0.10640 -> 0.10436); quotient_known 0.09776 -> 0.08963 (1d2777e's
 # sun, which did not re-pin it); the oracles unchanged.
+# Regenerated 2026-12-04 when the quotient methods' ratio became guided-filtered (physrelight.quotient.smooth_ratio,
+# Relighter(ratio_radius=3), study 27): quotient 0.10232 -> 0.10135, quotient_known 0.08963 -> 0.08711; the
+# others within 0.00006 of their pins on this machine (left as they were).
 QUICK_L1_PINS = {"proposed": 0.10418, "lambertian_sh": 0.10632, "shadownet_lambertian": 0.10395,
-                 "quotient": 0.10232, "quotient_known": 0.08963, "oracle_sh": 0.05557, "oracle_sh_shadow": 0.04682}
+                 "quotient": 0.10135, "quotient_known": 0.08711, "oracle_sh": 0.05557, "oracle_sh_shadow": 0.04682}
 QUICK_L1_BAND = 0.0003
 
 
