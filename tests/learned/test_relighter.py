@@ -178,3 +178,28 @@ def test_08_a_sequence_decomposes_once_and_gives_the_frames_of_separate_relights
     for a, b in zip(frames, separate):
         np.testing.assert_array_equal(a, b)
     assert not np.array_equal(frames[0], frames[1])  # the light did turn
+
+
+def test_09_the_quotient_ratio_is_smoothed_at_the_relighters_radius(relighter, photo) -> None:
+    """``Relighter.ratio_radius`` (study 27): the quotient's relit photo is the raw quotient with its ratio
+    passed through ``physrelight.quotient.smooth_ratio`` at that radius; radius 0 is the raw quotient, and a
+    negative or fractional radius is refused by name."""
+    from learned import Relighter
+    from physrelight import quotient
+
+    image, sky = photo
+    target, source = _target(3), _target(4)
+    out = relighter.relight_linear(image, sky, target, source_lighting=source, method="quotient", known_source=True)
+    raw = quotient.quotient_ratio(out["normals"], source[None].expand(2, -1, -1), target[None].expand(2, -1, -1),
+                                  mask=~sky)
+    # The ratio is scale-invariant, so the decomposition-unit scale of relight_linear does not enter.
+    want = torch.where(sky, image, image * quotient.smooth_ratio(image, raw, relighter.ratio_radius))
+    torch.testing.assert_close(out["relit"], want.clamp_min(0), rtol=1e-5, atol=1e-6)
+    assert relighter.ratio_radius == quotient.SMOOTH_RADIUS == 3
+    unsmoothed = Relighter(relighter.inverse, relighter.shadow_net, relighter.prior, relighter.res, ratio_radius=0)
+    got = unsmoothed.relight_linear(image, sky, target, source_lighting=source, method="quotient", known_source=True)
+    torch.testing.assert_close(got["relit"], torch.where(sky, image, image * raw).clamp_min(0), rtol=1e-5, atol=1e-6)
+    assert not torch.allclose(got["relit"], out["relit"])
+    for bad in (-1, 1.5):
+        with pytest.raises(ValueError, match="ratio_radius"):
+            Relighter(relighter.inverse, relighter.shadow_net, relighter.prior, relighter.res, ratio_radius=bad)
