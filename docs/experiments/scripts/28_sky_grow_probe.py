@@ -1,0 +1,79 @@
+"""Study 28 probe: growing the sky mask by a smooth sky-colour model, on real crops.
+
+Scores relight's full-resolution sky mask (learned.sky_segmentation.sky_mask_full_resolution, shipped
+128 px / band 6 / gauss) for a grid of ``grow`` reaches (fraction of the short side) on the crops of
+bench --real --full (seed 0, 16 crops per panorama, fov 45-75, 4 samples). Selection uses the training
+side only (city, courtyard, forest: IoU and boundary F on crops with sky; sky fraction called on crops
+without); sunrise (held out) is scored only with --heldout, once, after the choice.
+
+    .venv/bin/python docs/experiments/scripts/28_sky_grow_probe.py --round 1 -o docs/experiments/results/28_sky_grow_training.json
+    .venv/bin/python docs/experiments/scripts/28_sky_grow_probe.py -o docs/experiments/results/28_sky_grow_training_round2.json
+    .venv/bin/python docs/experiments/scripts/28_sky_grow_probe.py --heldout --only 0 --only REACH:ORDER:1 -o ...
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+import torch
+
+from learned import Relighter
+from learned import sky_segmentation as ss
+from physrelight import metrics
+from synth.panorama_crops import make_crops, shipped_panoramas
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("-o", "--out", required=True)
+    ap.add_argument("--heldout", action="store_true", help="score sunrise instead of the training side")
+    ap.add_argument("--only", action="append", default=[], help="REACH or REACH:ORDER:CLAMP (default: the grid)")
+    ap.add_argument("--round", type=int, default=2, help="1: unclamped degree 2 (round 1's grid); 2: round 2's grid")
+    args = ap.parse_args()
+    torch.set_num_threads(2)
+    model = Relighter.load().sky_segmenter
+    group = "heldout" if args.heldout else "training"
+    panos = [p for p in shipped_panoramas() if p.group == group]
+    if args.round == 1:
+        default = [f"{r}:2:0" for r in ("0", "0.05", "0.1", "0.2", "1.0")]
+    else:
+        default = ["0:2:1"] + [f"{r}:{o}:1" for r in ("0.05", "0.1", "0.2", "1.0") for o in (1, 2)]
+    grid = [g if ":" in g else f"{g}:2:1" for g in args.only] or default
+    rows = {g: {"iou": [], "f": [], "no_sky_called": [], "refused_with_sky": 0} for g in grid}
+    t0 = time.time()
+    for pano in panos:
+        for c in make_crops(pano, 16, 0, fov_range=(45.0, 75.0), samples=4):
+            lin = c.linear()
+            has_sky = c.sky.mean() >= 0.01
+            base, why = ss.sky_mask_full_resolution(model, lin, grow=0.0)
+            for g in grid:
+                reach, order, clamp = g.split(":")
+                # growth is the mask's last step, so it is applied here to the shipped mask
+                r_px = int(round(float(reach) * min(lin.shape[-2:])))
+                sky = ss.grow_sky_by_colour(base, lin, r_px, order=int(order), clamp=bool(int(clamp)))
+                m = sky[0, 0].numpy()
+                row = rows[g]
+                if has_sky:
+                    row["iou"].append(metrics.mask_iou(m, c.sky))
+                    row["f"].append(metrics.boundary_f(m, c.sky, 2.0))
+                    row["refused_with_sky"] += bool(why[0])
+                else:
+                    row["no_sky_called"].append(float(m.mean()))
+        print(f"{pano.name}: {time.time() - t0:.0f} s", flush=True)
+    out = {"group": group, "panoramas": [p.name for p in panos], "seconds": round(time.time() - t0, 1), "settings": {}}
+    for k, row in rows.items():
+        out["settings"][k] = {"iou": float(np.mean(row["iou"])), "boundary_f": float(np.mean(row["f"])),
+                              "no_sky_called": float(np.mean(row["no_sky_called"])) if row["no_sky_called"] else None,
+                              "refused_with_sky": row["refused_with_sky"], "crops_with_sky": len(row["iou"]),
+                              "iou_per_crop": [round(v, 4) for v in row["iou"]]}
+        s = out["settings"][k]
+        print(f"reach:order:clamp {k:>10}: IoU {s['iou']:.4f}  F {s['boundary_f']:.4f}  no-sky called {s['no_sky_called']}  "
+              f"refused {s['refused_with_sky']}/{s['crops_with_sky']}")
+    with open(args.out, "w") as f:
+        json.dump(out, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
