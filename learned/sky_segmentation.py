@@ -28,7 +28,7 @@ from . import checkpoint as ckpt
 from .data import resize_short_side
 from .networks import UNet
 
-__all__ = ["DUSK_SKY", "SEGMENT_RES", "WIDE_AUGMENT", "SkySegmenter", "dusk_sky", "jpeg_like", "label_components", "load_sky_segmenter", "photometric_augment", "plausible_sky",
+__all__ = ["DUSK_SKY", "SEGMENT_RES", "WIDE_AUGMENT", "SkySegmenter", "dusk_sky", "grow_sky_by_colour", "jpeg_like", "label_components", "load_sky_segmenter", "photometric_augment", "plausible_sky",
            "refine_sky_boundary", "segment_sky", "sky_mask_full_resolution", "sky_probability"]
 
 _LUMA = colour.LUMINANCE
@@ -347,7 +347,8 @@ def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor
 def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int | None = SEGMENT_RES,
                              eps: float = 1e-2, threshold: float = 0.5,
                              band: int = BAND_WORKING_PIXELS,
-                             refine: str = REFINEMENT) -> tuple[torch.Tensor, list[str]]:
+                             refine: str = REFINEMENT,
+                             grow: float | None = None) -> tuple[torch.Tensor, list[str]]:
     """The sky of real photos at full resolution, and a reason per photo when there is none.
 
     The segmenter runs with its short side at ``res`` (:data:`SEGMENT_RES`); its mask keeps only a
@@ -364,6 +365,8 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
         threshold: the sky probability above which a working pixel is sky, in (0, 1).
         band: working pixels near the boundary decided by colour (:func:`refine_sky_boundary`);
             0: none.
+        grow: how far from the mask, as a fraction of the short side, sky-coloured pixels are
+            added (:func:`grow_sky_by_colour`); None: :data:`GROW_REACH`; 0: none.
 
     Returns:
         ``(sky (B, 1, H, W) bool, reasons)``: ``reasons[b]`` is ``""`` when photo ``b`` has a
@@ -380,6 +383,10 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
         raise ValueError(f"band must be an integer >= 0, got {band!r}")
     if refine not in REFINEMENTS:
         raise ValueError(f"refine must be one of {REFINEMENTS}, got {refine!r}")
+    grow = GROW_REACH if grow is None else grow
+    if isinstance(grow, bool) or not isinstance(grow, (int, float)) or not 0.0 <= float(grow) <= 1.0:
+        raise ValueError(f"grow must be a number in [0, 1], got {grow!r}")
+    reach = int(round(float(grow) * min(image.shape[-2:])))
     param = next(model.parameters())
     small = image.to(param.dtype) if res is None else resize_short_side(image.to(param.dtype), res)
     with torch.no_grad():
@@ -395,16 +402,18 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
         lum = (image[b: b + 1] * image.new_tensor(_LUMA)[None, :, None, None]).sum(1, keepdim=True)
         guide = torch.log(lum.clamp_min(1e-3)).to(p.dtype)
         up = guided_upsample(guide, p.to(guide.dtype), eps=eps) > threshold
-        if band == 0:
-            masks.append(up)
-            continue
-        width = max(1, band * round(image.shape[-2] / small.shape[-2]))
-        masks.append(refine_sky_boundary(up, image[b: b + 1], width, refine))
+        if band > 0:
+            width = max(1, band * round(image.shape[-2] / small.shape[-2]))
+            up = refine_sky_boundary(up, image[b: b + 1], width, refine)
+        masks.append(grow_sky_by_colour(up, image[b: b + 1], reach))
     return torch.cat(masks), reasons
 
 
 def _dilate(mask: torch.Tensor, r: int) -> torch.Tensor:
-    return F.max_pool2d(mask.float(), 2 * r + 1, stride=1, padding=r) > 0.5
+    """``mask (B, 1, H, W)`` bool dilated by a ``(2r+1)^2`` square: separable, so a wide ``r`` stays cheap."""
+    r = min(r, max(mask.shape[-2:]))
+    m = F.max_pool2d(mask.float(), (1, 2 * r + 1), stride=1, padding=(0, r))
+    return F.max_pool2d(m, (2 * r + 1, 1), stride=1, padding=(r, 0)) > 0.5
 
 
 def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refine: str = REFINEMENT) -> torch.Tensor:
@@ -456,3 +465,114 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
     if d_sky is None or d_fg is None:
         return sky
     return torch.where(near, d_sky < d_fg, sky)
+
+
+GROW_REACH = 0.0
+"""How far from the mask (a fraction of the photo's short side) :func:`grow_sky_by_colour` may add
+sky-coloured pixels; 0: not at all."""
+GROW_CHI2 = 11.34
+"""A grown pixel's colour must lie within this squared Mahalanobis distance of the smooth sky model
+(chi-square with 3 degrees of freedom at 0.99)."""
+GROW_ERODE = 2
+"""Pixels within this many pixels of the mask's boundary are left out of the sky model's fit."""
+_GROW_MAX_FIT = 20000
+
+
+def _sky_basis(h: int, w: int, dtype: torch.dtype, order: int = 2,
+               box: tuple[float, float, float, float] | None = None) -> torch.Tensor:
+    """``(K, H, W)`` monomials of pixel centres up to ``order`` (1: 1, u, v; 2: also u^2, uv, v^2),
+    u and v centred and scaled by the longer side, and clamped to ``box = (u0, u1, v0, v1)``."""
+    s = float(max(h, w))
+    v = ((torch.arange(h, dtype=dtype) + 0.5 - h / 2) / s)[:, None].expand(h, w)
+    u = ((torch.arange(w, dtype=dtype) + 0.5 - w / 2) / s)[None, :].expand(h, w)
+    if box is not None:
+        u, v = u.clamp(box[0], box[1]), v.clamp(box[2], box[3])
+    terms = [torch.ones_like(u), u, v] + ([u * u, u * v, v * v] if order == 2 else [])
+    return torch.stack(terms)
+
+
+def grow_sky_by_colour(sky: torch.Tensor, image: torch.Tensor, reach: int, chi2: float = GROW_CHI2,
+                       order: int = 2, clamp: bool = True, max_spread: float | None = None) -> torch.Tensor:
+    """Add the pixels that have the sky's colour where the sky would be, near the mask.
+
+    A working-resolution segmenter sees a lattice tower or a tree's crown as solid; the sky
+    between its bars or leaves is too far inside for :func:`refine_sky_boundary`'s band. A clear
+    or overcast sky's log RGB varies smoothly across a photo, so it is modelled per channel as a
+    polynomial in the pixel position, fitted by least squares to the mask's pixels away from its
+    boundary (twice, the second time without the fit's 3-sigma outliers; the spread per channel is
+    the residuals' MAD scaled to a standard deviation, at least ``sqrt(VARIANCE_FLOOR)``). A
+    non-sky pixel within ``reach`` pixels of the mask becomes sky when its colour is within
+    squared Mahalanobis distance ``chi2`` of the model's prediction at its position, and likelier
+    under it than under the local Gaussian of the surrounding non-sky pixels (as in
+    :func:`refine_sky_boundary`'s ``"gauss"``). A dark bar or a lit wall is far from the sky's
+    colour; a blue wall is nearer its own surroundings. Nothing is removed. With ``clamp``, the model is
+    not extrapolated: a pixel outside the fitted pixels' bounding box gets the prediction at the
+    box's nearest point (a quadratic fitted to a sky at the top would otherwise dive toward a grey
+    road below it).
+
+    Args:
+        sky: ``(1, 1, H, W)`` bool. image: ``(1, 3, H, W)`` linear. reach: pixels, >= 0.
+        chi2: the squared Mahalanobis gate, > 0. order: the polynomial's degree, 1 or 2.
+        clamp: evaluate the model only inside the fitted pixels' bounding box.
+        max_spread: when the model's spread in log RGB exceeds this in any channel, the mask it was
+            fitted to is not a clean sky (a façade or foliage taken for sky) and nothing is added;
+            None: no such check.
+
+    Returns:
+        ``(1, 1, H, W)`` bool, a superset of ``sky``.
+    """
+    from physrelight.guided_filter import box_filter
+
+    if sky.ndim != 4 or sky.shape[:2] != (1, 1):
+        raise ValueError(f"sky must have shape (1, 1, H, W), got {tuple(sky.shape)}")
+    if image.ndim != 4 or image.shape[:2] != (1, 3) or image.shape[-2:] != sky.shape[-2:]:
+        raise ValueError(f"image must have shape (1, 3, {sky.shape[-2]}, {sky.shape[-1]}), got {tuple(image.shape)}")
+    if isinstance(reach, bool) or not isinstance(reach, int) or reach < 0:
+        raise ValueError(f"reach must be an integer >= 0, got {reach!r}")
+    if not chi2 > 0:
+        raise ValueError(f"chi2 must be > 0, got {chi2!r}")
+    if order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2, got {order!r}")
+    if reach == 0:
+        return sky
+    h, w = sky.shape[-2:]
+    x = torch.log(image.clamp_min(1e-4)).to(torch.float64)[0]  # (3, H, W)
+    sure = ~_dilate(~sky, GROW_ERODE)[0, 0]
+    n_sure = int(sure.sum())
+    cand = (_dilate(sky, reach) & ~sky)[0, 0]
+    if n_sure < 64 or not bool(cand.any()) or bool(sure.all()):
+        return sky
+    idx = torch.nonzero(sure.flatten()).squeeze(1)
+    basis = _sky_basis(h, w, torch.float64, order)
+    if clamp:
+        uv = basis[1:3].reshape(2, -1)[:, idx]
+        box = (float(uv[0].min()), float(uv[0].max()), float(uv[1].min()), float(uv[1].max()))
+        basis = _sky_basis(h, w, torch.float64, order, box)
+    if idx.numel() > _GROW_MAX_FIT:  # an even, deterministic subsample keeps the fit cheap
+        idx = idx[torch.linspace(0, idx.numel() - 1, _GROW_MAX_FIT).round().long()]
+    a = basis.reshape(basis.shape[0], -1)[:, idx].T  # (N, K)
+    y = x.reshape(3, -1)[:, idx].T  # (N, 3)
+    keep = torch.ones(a.shape[0], dtype=torch.bool)
+    for _ in range(2):
+        coef = torch.linalg.lstsq(a[keep], y[keep]).solution  # (K, 3)
+        res = y - a @ coef
+        med = res[keep].median(0).values
+        sigma = (1.4826 * (res[keep] - med).abs().median(0).values).clamp_min(math.sqrt(VARIANCE_FLOOR))
+        keep = ((res - med).abs() <= 3 * sigma).all(1)
+        if int(keep.sum()) < 16:
+            return sky
+    if max_spread is not None and float(sigma.max()) > max_spread:
+        return sky
+    pred = torch.einsum("khw,kc->chw", basis, coef) + med[:, None, None]
+    maha = (((x - pred) / sigma[:, None, None]) ** 2).sum(0)
+    d_sky = maha + 2 * torch.log(sigma).sum()
+    fg = (~sky)[0, 0].to(torch.float64)[None, None]
+    r = max(4, 4 * reach)
+    n = box_filter(fg, r)
+    if float(fg.sum()) == 0:
+        return sky
+    mu = box_filter(x[None] * fg, r) / n.clamp_min(1e-12)
+    var = (box_filter(x[None] ** 2 * fg, r) / n.clamp_min(1e-12) - mu * mu).clamp_min(0) + VARIANCE_FLOOR
+    d_fg = (((x[None] - mu) ** 2 / var + torch.log(var)).sum(1))[0]
+    grow = cand & (maha < chi2) & (d_sky < d_fg) & (n[0, 0] > 0)
+    return sky | grow[None, None]

@@ -8,6 +8,7 @@ without); sunrise (held out) is scored only with --heldout, once, after the choi
 
     .venv/bin/python docs/experiments/scripts/28_sky_grow_probe.py --round 1 -o docs/experiments/results/28_sky_grow_training.json
     .venv/bin/python docs/experiments/scripts/28_sky_grow_probe.py -o docs/experiments/results/28_sky_grow_training_round2.json
+    .venv/bin/python docs/experiments/scripts/28_sky_grow_probe.py --round 3 -o docs/experiments/results/28_sky_grow_training_round3.json
     .venv/bin/python docs/experiments/scripts/28_sky_grow_probe.py --heldout --only 0 --only REACH:ORDER:1 -o ...
 """
 from __future__ import annotations
@@ -29,8 +30,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("-o", "--out", required=True)
     ap.add_argument("--heldout", action="store_true", help="score sunrise instead of the training side")
-    ap.add_argument("--only", action="append", default=[], help="REACH or REACH:ORDER:CLAMP (default: the grid)")
-    ap.add_argument("--round", type=int, default=2, help="1: unclamped degree 2 (round 1's grid); 2: round 2's grid")
+    ap.add_argument("--only", action="append", default=[], help="REACH or REACH:ORDER:CLAMP[:MAX_SPREAD] (default: the grid)")
+    ap.add_argument("--round", type=int, default=2, help="1: unclamped degree 2 (round 1's grid); 2: round 2's grid; 3: round 3's (gated by the spread)")
     args = ap.parse_args()
     torch.set_num_threads(2)
     model = Relighter.load().sky_segmenter
@@ -38,8 +39,10 @@ def main() -> None:
     panos = [p for p in shipped_panoramas() if p.group == group]
     if args.round == 1:
         default = [f"{r}:2:0" for r in ("0", "0.05", "0.1", "0.2", "1.0")]
-    else:
+    elif args.round == 2:
         default = ["0:2:1"] + [f"{r}:{o}:1" for r in ("0.05", "0.1", "0.2", "1.0") for o in (1, 2)]
+    else:
+        default = ["0:2:1"] + [f"{r}:2:1:{s}" for r in ("0.05", "0.1", "0.2") for s in ("0.05", "0.1", "0.2")]
     grid = [g if ":" in g else f"{g}:2:1" for g in args.only] or default
     rows = {g: {"iou": [], "f": [], "no_sky_called": [], "refused_with_sky": 0} for g in grid}
     t0 = time.time()
@@ -49,10 +52,11 @@ def main() -> None:
             has_sky = c.sky.mean() >= 0.01
             base, why = ss.sky_mask_full_resolution(model, lin, grow=0.0)
             for g in grid:
-                reach, order, clamp = g.split(":")
+                reach, order, clamp, *spread = g.split(":")
                 # growth is the mask's last step, so it is applied here to the shipped mask
                 r_px = int(round(float(reach) * min(lin.shape[-2:])))
-                sky = ss.grow_sky_by_colour(base, lin, r_px, order=int(order), clamp=bool(int(clamp)))
+                sky = ss.grow_sky_by_colour(base, lin, r_px, order=int(order), clamp=bool(int(clamp)),
+                                            max_spread=float(spread[0]) if spread else None)
                 m = sky[0, 0].numpy()
                 row = rows[g]
                 if has_sky:
