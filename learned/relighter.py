@@ -167,6 +167,9 @@ class Relighter:
         # The quotient methods' ratio is guided-filtered at this radius (px at the working resolution; 0 = raw
         # ratio, the figures before study 27): physrelight.quotient.smooth_ratio.
         self.ratio_radius = int(ratio_radius)
+        # The segmenter's sky is grown by sky-coloured pixels within this fraction of the short side
+        # (learned.sky_segmentation.grow_sky_by_colour); 0, off, by default (study 28).
+        self.sky_grow = 0.0
 
     @classmethod
     def load(cls, path: str | os.PathLike | None = None, renderer: str | os.PathLike | None = None,
@@ -548,7 +551,7 @@ class Relighter:
         if sky_mask is None and self.sky_segmenter is not None:
             from .sky_segmentation import sky_mask_full_resolution
 
-            sky, reasons = sky_mask_full_resolution(self.sky_segmenter, lin)
+            sky, reasons = sky_mask_full_resolution(self.sky_segmenter, lin, grow=self.sky_grow)
             return sky, reasons[0]
         return _as_mask(sky_mask, lin), ""
 

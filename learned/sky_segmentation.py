@@ -356,7 +356,8 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
     brought to full size by the guided filter on the photo's log luminance
     (:func:`physrelight.guided_filter.guided_upsample`), so the boundary follows the photo's
     edges, and thresholded at ``threshold``; pixels within ``band`` working pixels of the boundary
-    are then decided by colour (:func:`refine_sky_boundary`; none by default, :data:`BAND_WORKING_PIXELS`).
+    are then decided by colour (:func:`refine_sky_boundary`, :data:`BAND_WORKING_PIXELS`); with ``grow``,
+    sky-coloured pixels near the mask are added last (:func:`grow_sky_by_colour`).
 
     Args:
         image: ``(B, 3, H, W)`` linear photos.
@@ -366,7 +367,8 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
         band: working pixels near the boundary decided by colour (:func:`refine_sky_boundary`);
             0: none.
         grow: how far from the mask, as a fraction of the short side, sky-coloured pixels are
-            added (:func:`grow_sky_by_colour`); None: :data:`GROW_REACH`; 0: none.
+            added (:func:`grow_sky_by_colour`, gated at :data:`GROW_MAX_SPREAD`); None:
+            :data:`GROW_REACH` (0: none).
 
     Returns:
         ``(sky (B, 1, H, W) bool, reasons)``: ``reasons[b]`` is ``""`` when photo ``b`` has a
@@ -405,7 +407,7 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
         if band > 0:
             width = max(1, band * round(image.shape[-2] / small.shape[-2]))
             up = refine_sky_boundary(up, image[b: b + 1], width, refine)
-        masks.append(grow_sky_by_colour(up, image[b: b + 1], reach))
+        masks.append(grow_sky_by_colour(up, image[b: b + 1], reach, max_spread=GROW_MAX_SPREAD))
     return torch.cat(masks), reasons
 
 
@@ -468,11 +470,17 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
 
 
 GROW_REACH = 0.0
-"""How far from the mask (a fraction of the photo's short side) :func:`grow_sky_by_colour` may add
-sky-coloured pixels; 0: not at all."""
+"""How far from the mask (a fraction of the photo's short side) :func:`sky_mask_full_resolution` lets
+:func:`grow_sky_by_colour` add sky-coloured pixels; 0: not at all. Off by default: no reach improved
+the training panoramas' crops beyond noise (study 28, docs/experiments/28-sky-growth-by-colour.md). An
+opt-in for lattices and bare branches against a clean sky (``relight --sky-grow``)."""
 GROW_CHI2 = 11.34
 """A grown pixel's colour must lie within this squared Mahalanobis distance of the smooth sky model
 (chi-square with 3 degrees of freedom at 0.99)."""
+GROW_MAX_SPREAD = 0.1
+"""The sky model's largest spread (log RGB, per channel) at which :func:`sky_mask_full_resolution`'s
+growth adds anything: wider, and the mask it was fitted to holds façade or foliage (study 28, round 3:
+neutral on the training crops at reach 0.05; rocket.jpg's dusk sky fits within it)."""
 GROW_ERODE = 2
 """Pixels within this many pixels of the mask's boundary are left out of the sky model's fit."""
 _GROW_MAX_FIT = 20000

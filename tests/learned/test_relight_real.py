@@ -145,6 +145,25 @@ def test_07_the_rocket_has_a_sky_and_its_towers_stay(relighter) -> None:
     assert not bool(sky[0, 0, h // 2: h - h // 6, w // 2 - 2: w // 2 + 2].any())
 
 
+def test_07b_the_relighters_sky_grow_reaches_the_mask(relighter) -> None:
+    """``Relighter.sky_grow`` (``relight --sky-grow``) is handed to the mask: on the rocket it adds the
+    dusk sky inside the right-hand tower's lattice and keeps every pixel of the default mask."""
+    skimage = pytest.importorskip("skimage")
+    from learned.relighter import Relighter
+
+    lin = colour.from_ldr(torch.from_numpy(skimage.data.rocket()).permute(2, 0, 1)[None].float() / 255)
+    base, _ = Relighter.photo_sky(relighter, lin)
+    relighter.sky_grow = 0.1
+    try:
+        grown, why = Relighter.photo_sky(relighter, lin)
+    finally:
+        relighter.sky_grow = 0.0
+    assert why == "" and bool(grown[base].all())
+    w = lin.shape[-1]
+    right = (slice(None), slice(None), slice(None), slice(int(0.85 * w), w))
+    assert float(grown[right].float().mean()) > float(base[right].float().mean()) + 0.05
+
+
 def _jpeg_with_exif(path: Path, img: np.ndarray, orientation: int, f35: int | None = None) -> None:
     from PIL import Image
 
@@ -187,7 +206,7 @@ def photo_file(tmp_path) -> Path:
 
 
 @pytest.mark.parametrize("case", ["rgb_mask", "all_sky", "no_sky", "sky_with_env", "bad_source_env", "fps",
-                                  "unwritable", "layers_is_file", "source_without_quotient"])
+                                  "sky_grow", "unwritable", "layers_is_file", "source_without_quotient"])
 def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, capsys, case) -> None:
     out = tmp_path / "out" / "x.png"
     out.parent.mkdir()
@@ -206,6 +225,8 @@ def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, 
     elif case == "fps":
         args = ["relight", str(photo_file), "--sun", "20", "0", "--sequence", "3", "--fps", "0", "-o",
                 str(tmp_path / "out" / "x.gif")]
+    elif case == "sky_grow":
+        args += ["--sky-grow", "1.5"]
     elif case == "unwritable":
         args[args.index("-o") + 1] = str(tmp_path / "nowhere" / "x.png")
     elif case == "layers_is_file":
@@ -213,7 +234,7 @@ def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, 
         args += ["--layers", str(tmp_path / "L")]
     elif case == "source_without_quotient":
         args += ["--source-env", str(FOREST), "--method", "proposed"]
-    if case == "fps":
+    if case in ("fps", "sky_grow"):
         with pytest.raises(SystemExit) as exit_:
             _cli(args, capsys)
         assert exit_.value.code == 2
@@ -258,3 +279,79 @@ def test_04b_a_textured_foreground_keeps_its_outliers_against_a_smooth_sky() -> 
     assert not bool(gauss[pale].any())
     assert bool((gauss[:30] == truth[:30]).all())
     assert float((gauss != truth).float().mean()) < float((local != truth).float().mean())
+
+
+def _lattice_scene(H: int = 64, W: int = 96):
+    """A noisy sky whose log colour is a quadratic of the position, a lattice tower (2-px dark bars
+    every 6 px) in columns 30-65 from the top down to the ground at row 48, and a textured ground.
+    Returns ``(image (1, 3, H, W), coarse mask, true sky, bars)``: the coarse mask calls the whole
+    tower and the ground foreground, as a working-resolution segmenter does."""
+    g = torch.Generator().manual_seed(1)
+    v = torch.linspace(-0.5, 0.5, H)[:, None].expand(H, W)
+    u = torch.linspace(-0.7, 0.7, W)[None, :].expand(H, W)
+    base = torch.log(torch.tensor([0.25, 0.45, 0.9]))[:, None, None]
+    logsky = base + (0.6 * v + 0.2 * u * u)[None] + 0.01 * torch.randn(3, H, W, generator=g)
+    img = torch.exp(logsky)[None]
+    ground = torch.exp(torch.empty(1, 1, H - 48, W).uniform_(-0.5, 0.5, generator=g))
+    img[..., 48:, :] = torch.tensor([0.15, 0.18, 0.08])[None, :, None, None] * ground
+    bars = torch.zeros(H, W, dtype=torch.bool)
+    cols, rows = torch.arange(W), torch.arange(H)
+    in_tower = (cols >= 30) & (cols < 66)
+    bars[:48] = in_tower[None, :] & ((((cols - 30) % 6) < 2)[None, :] | (((rows[:48] % 6) < 2)[:, None]))
+    img[0, :, bars] = 0.03
+    truth = torch.zeros(H, W, dtype=torch.bool)
+    truth[:48] = True
+    truth &= ~bars
+    coarse = truth.clone()
+    coarse[:, 30:66] = False
+    return img, coarse[None, None], truth, bars
+
+
+def test_04c_the_sky_inside_a_lattice_is_grown_back_by_its_colour() -> None:
+    """Growth by the smooth sky-colour model (the opt-in ``relight --sky-grow``) finds the sky
+    between a lattice's bars that the coarse mask calls solid, and adds no bar or ground pixel."""
+    from learned.sky_segmentation import grow_sky_by_colour
+
+    img, coarse, truth, bars = _lattice_scene()
+    got = grow_sky_by_colour(coarse, img, reach=40, max_spread=0.1)[0, 0]
+    holes = truth & ~coarse[0, 0]
+    assert bool(holes.any())
+    assert float(got[holes].float().mean()) > 0.99
+    assert not bool(got[bars].any()) and not bool(got[48:].any())
+    assert bool(got[coarse[0, 0]].all())  # nothing is removed
+    assert torch.equal(grow_sky_by_colour(coarse, img, reach=0), coarse)
+    # a reach shorter than the distance to the tower's middle leaves its middle alone
+    short = grow_sky_by_colour(coarse, img, reach=6)[0, 0]
+    assert not bool(short[holes & (torch.arange(96) >= 40)[None, :] & (torch.arange(96) < 56)[None, :]].any())
+
+
+def test_04d_the_growth_neither_extrapolates_the_sky_nor_trusts_a_mixed_mask() -> None:
+    """(a) A ground whose colour is the sky's gradient carried on below the horizon is added when the
+    sky model is extrapolated, and not when it is clamped to the fitted pixels (the default).
+    (b) A mask that already holds a dark façade gives the model a wide spread: with ``max_spread``
+    nothing is added. Bad arguments are refused by name."""
+    from learned.sky_segmentation import grow_sky_by_colour
+
+    H, W = 64, 96
+    g = torch.Generator().manual_seed(2)
+    v = torch.linspace(-0.5, 0.5, H)[:, None, None].expand(H, W, 1).permute(2, 0, 1)
+    logsky = torch.log(torch.tensor([0.25, 0.45, 0.9]))[:, None, None] - 2.0 * v  # brighter toward the horizon
+    img = torch.exp(logsky + 0.01 * torch.randn(3, H, W, generator=g))[None]
+    img[..., 30:44, :] = 0.03  # a dark treeline
+    img[..., 44:, :] *= torch.exp(torch.empty(1, 1, H - 44, W).uniform_(-0.4, 0.4, generator=g))  # textured ground
+    sky = torch.zeros(1, 1, H, W, dtype=torch.bool)
+    sky[..., :30, :] = True
+    loose = grow_sky_by_colour(sky, img, reach=40, clamp=False)[0, 0]
+    tight = grow_sky_by_colour(sky, img, reach=40)[0, 0]
+    assert float(loose[44:].float().mean()) > 0.1  # the ground texels within the gate: about a sixth
+    assert not bool(tight[30:].any())
+    img2, coarse, truth, bars = _lattice_scene()
+    mixed = coarse.clone()
+    mixed[..., :40, 66:90] = True  # a dark façade taken for sky
+    img2[..., :40, 66:90] = torch.tensor([0.05, 0.04, 0.03])[None, :, None, None]
+    assert torch.equal(grow_sky_by_colour(mixed, img2, reach=40, max_spread=0.1), mixed)
+    for kw, word in ((dict(reach=-1), "reach"), (dict(reach=4, chi2=0.0), "chi2"), (dict(reach=4, order=3), "order")):
+        with pytest.raises(ValueError, match=word):
+            grow_sky_by_colour(coarse, img2, **kw)
+    with pytest.raises(ValueError, match="image"):
+        grow_sky_by_colour(coarse, img2[..., :10, :], reach=4)
