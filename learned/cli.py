@@ -296,7 +296,8 @@ def _train_renderer(args: argparse.Namespace) -> int:
                          val_data=args.val_data, val_split=args.val_split, train_split=args.train_split,
                          width=args.width, depth=args.depth, d_width=args.d_width, res=args.res, batch=args.batch,
                          steps=args.steps, phase1_steps=args.phase1_steps, cross_scale=args.cross_scale,
-                         cross_match_scale=not args.cross_absolute, additive=not args.no_additive, lr=args.lr,
+                         cross_match_scale=not args.cross_absolute, additive=not args.no_additive,
+                         base=args.base, lr=args.lr,
                          lr_d=args.lr_d, seed=args.seed, val_every=args.val_every, val_images=args.val_images,
                          ckpt_every=args.ckpt_every, log_every=args.log_every, threads=args.threads, weights=weights,
                          progress=not args.quiet)
@@ -348,6 +349,9 @@ def _add_renderer_stages(tsub: argparse._SubParsersAction) -> None:
                     help="cross-projection compared at 1/N resolution (default: 4)")
     rn.add_argument("--no-additive", action="store_true",
                     help="renderer output = Lambertian render x learned gain only (no additive term)")
+    rn.add_argument("--base", choices=("lambertian", "quotient"), default="lambertian",
+                    help="what the learned gain multiplies: the shadowed Lambertian render (the paper's; default) "
+                         "or the quotient relighting of the photo")
     rn.add_argument("--cross-absolute", action="store_true",
                     help="compare cross-projections without the per-channel scale match")
     rn.add_argument("--d-width", type=positive_int, default=16, help="discriminator width (default: 16)")

@@ -27,6 +27,12 @@ renderer gives "ShadowNet + Lambertian SH" relighting and training learns the co
 (texture the albedo lost via ``r``, shadow and shading errors via ``g``). With
 ``additive=False`` (the shipped weights) only the gain is used: ``r`` is in absolute units
 and showed as colour casts in dark targets, a gain scales with the target's brightness.
+
+``base="quotient"`` (issue 26: a renderer on top of the physical core) adds three channels,
+14-16, the quotient relighting ``image * S(n; L_target) / S(n; L_source)``
+(:func:`physrelight.quotient.quotient_relight`, ratio smoothed as the ``quotient`` method does),
+and the gain acts on it instead: ``x = quotient * exp(g)``. The untrained renderer is then the
+quotient method, and relighting a photo to its own lighting starts from the photo itself.
 """
 
 from __future__ import annotations
@@ -41,11 +47,15 @@ from physrelight import image_model
 from . import checkpoint as ckpt
 from .networks import UNet
 
-__all__ = ["CHANNELS", "NeuralRenderer", "lambertian_relit", "load_renderer", "positive", "render_relit",
+__all__ = ["BASES", "CHANNELS", "NeuralRenderer", "lambertian_relit", "load_renderer", "positive", "render_relit",
            "renderer_inputs"]
 
 CHANNELS = ("albedo_r", "albedo_g", "albedo_b", "normal_x", "normal_y", "normal_z", "shading_r", "shading_g",
             "shading_b", "shadow", "sky", "residual_r", "residual_g", "residual_b")
+
+BASES = ("lambertian", "quotient")
+"""What the renderer's gain multiplies: the shadowed Lambertian render of the decomposition, or the
+quotient relighting of the photo (then 3 more input channels)."""
 
 _TAU = 1e-3  # below this (linear radiance) the output unit bends smoothly towards 0
 
@@ -71,8 +81,8 @@ def _check_lighting(x: torch.Tensor, name: str, batch: int) -> None:
 
 def renderer_inputs(image: torch.Tensor, sky: torch.Tensor, albedo: torch.Tensor, normals: torch.Tensor,
                     source_shadow: torch.Tensor, source_lighting: torch.Tensor, target_lighting: torch.Tensor,
-                    target_shadow: torch.Tensor) -> torch.Tensor:
-    """The renderer's 14 input channels (order in the module docstring).
+                    target_shadow: torch.Tensor, quotient: torch.Tensor | None = None) -> torch.Tensor:
+    """The renderer's 14 input channels (order in the module docstring), 17 with ``quotient``.
 
     Args:
         image: ``(B, 3, H, W)`` linear photo.
@@ -82,9 +92,11 @@ def renderer_inputs(image: torch.Tensor, sky: torch.Tensor, albedo: torch.Tensor
         source_lighting: ``(B, 9, 3)`` the decomposition's lighting (camera-frame SH).
         target_lighting: ``(B, 9, 3)`` camera-frame SH in the decomposition's units.
         target_shadow: ``(B, 1, H, W)`` ShadowNet on ``target_lighting``.
+        quotient: ``(B, 3, H, W)`` the quotient relighting of ``image`` to ``target_lighting``
+            (for a ``base="quotient"`` renderer), or None.
 
     Returns:
-        ``(B, 14, H, W)``.
+        ``(B, 14, H, W)``, or ``(B, 17, H, W)`` with ``quotient``.
 
     Raises:
         ValueError: a tensor of the wrong shape (the message names it and its shape).
@@ -102,24 +114,32 @@ def renderer_inputs(image: torch.Tensor, sky: torch.Tensor, albedo: torch.Tensor
     fg = (~sky).to(image.dtype)
     shading = image_model.shading(normals, target_lighting.to(image.dtype))
     residual = image_model.residual(image, albedo, normals, source_lighting.to(image.dtype), source_shadow)
-    return torch.cat([albedo * fg, normals * fg, shading * fg, target_shadow * fg, 1.0 - fg, residual * fg], 1)
+    parts = [albedo * fg, normals * fg, shading * fg, target_shadow * fg, 1.0 - fg, residual * fg]
+    if quotient is not None:
+        _check(quotient, 3, "quotient", like)
+        parts.append(quotient * fg)
+    return torch.cat(parts, 1)
 
 
 class NeuralRenderer(nn.Module):
-    """UNet on the 14 channels -> relit linear RGB (see the module docstring).
+    """UNet on the 14 channels (17 for ``base="quotient"``) -> relit linear RGB (see the module docstring).
 
     Args:
         width: UNet width (first-level channels).
         depth: UNet depth (downsamplings).
         additive: use the additive term ``r``; False = gain only, ``x = base * exp(g)``
             (every correction then scales with the target's brightness).
+        base: what the gain multiplies (:data:`BASES`): ``"lambertian"``, the shadowed
+            Lambertian render (the paper's, and the shipped weights'); ``"quotient"``, the
+            quotient relighting given as channels 14-16.
     """
 
-    in_channels = 14
-
-    def __init__(self, width: int = 16, depth: int = 3, additive: bool = True) -> None:
+    def __init__(self, width: int = 16, depth: int = 3, additive: bool = True, base: str = "lambertian") -> None:
         super().__init__()
-        self.width, self.depth, self.additive = width, depth, bool(additive)
+        if base not in BASES:
+            raise ValueError(f"base must be one of {BASES}, got {base!r}")
+        self.width, self.depth, self.additive, self.base = width, depth, bool(additive), base
+        self.in_channels = 14 if base == "lambertian" else 17
         self.unet = UNet(self.in_channels, 6, width, depth)
         with torch.no_grad():
             # Start at g = r = 0 (the ShadowNet + Lambertian render) with small head weights,
@@ -128,13 +148,17 @@ class NeuralRenderer(nn.Module):
             self.unet.head.bias.zero_()
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """``(B, 14, H, W)`` from :func:`renderer_inputs` -> ``(B, 3, H, W)`` linear RGB >= 0."""
+        """``(B, 14, H, W)`` (``(B, 17, H, W)`` for ``base="quotient"``) from :func:`renderer_inputs`
+        -> ``(B, 3, H, W)`` linear RGB >= 0."""
         _check(x, self.in_channels, "renderer input", None)
         albedo, shading, shadow = x[:, 0:3], x[:, 6:9], x[:, 9:10]
-        base = albedo * shading * shadow
+        base = albedo * shading * shadow if self.base == "lambertian" else x[:, 14:17]
         # Radiance spans decades: the network sees shading and residual on a compressed
         # (signed log) scale; the raw values enter only through ``base`` and ``r``.
-        feats = torch.cat([x[:, 0:6], _slog(x[:, 6:9]), x[:, 9:11], _slog(x[:, 11:14])], 1)
+        feats = [x[:, 0:6], _slog(x[:, 6:9]), x[:, 9:11], _slog(x[:, 11:14])]
+        if self.base == "quotient":
+            feats.append(_slog(x[:, 14:17]))
+        feats = torch.cat(feats, 1)
         out = self.unet(feats)
         gain = torch.exp(out[:, 0:3].clamp(-8.0, 8.0))
         return positive(base * gain + 0.1 * out[:, 3:6]) if self.additive else positive(base * gain)
@@ -153,7 +177,7 @@ def lambertian_relit(decomposition: dict[str, torch.Tensor], target: torch.Tenso
 
 def render_relit(renderer: NeuralRenderer, image: torch.Tensor, sky: torch.Tensor,
                  decomposition: dict[str, torch.Tensor], target: torch.Tensor,
-                 target_shadow: torch.Tensor) -> torch.Tensor:
+                 target_shadow: torch.Tensor, quotient: torch.Tensor | None = None) -> torch.Tensor:
     """Relight a decomposed photo with the neural renderer.
 
     Args:
@@ -164,25 +188,32 @@ def render_relit(renderer: NeuralRenderer, image: torch.Tensor, sky: torch.Tenso
             ``normals``, ``shadow``, ``lighting`` ``(B, 9, 3)``.
         target: ``(B, 9, 3)`` camera-frame SH in the decomposition's units.
         target_shadow: ``(B, 1, H, W)`` ShadowNet on ``target``.
+        quotient: ``(B, 3, H, W)`` the quotient relighting of ``image`` to ``target``; needed by
+            a ``base="quotient"`` renderer, refused by a ``"lambertian"`` one.
 
     Returns:
         ``(B, 3, H, W)`` linear relit photo; sky pixels are the input's, bit for bit.
     """
+    base = getattr(renderer, "base", "lambertian")
+    if (base == "quotient") != (quotient is not None):
+        raise ValueError(f"a {base!r} renderer {'needs' if base == 'quotient' else 'takes no'} quotient image")
     for key in ("albedo", "normals", "shadow", "lighting"):
         if key not in decomposition:
             raise ValueError(f"decomposition lacks {key!r} (have {sorted(decomposition)})")
     x = renderer_inputs(image, sky, decomposition["albedo"], decomposition["normals"], decomposition["shadow"],
-                        decomposition["lighting"], target, target_shadow)
+                        decomposition["lighting"], target, target_shadow, quotient)
     return torch.where(sky, image, renderer(x))
 
 
 def load_renderer(path: str | Path) -> NeuralRenderer:
     """A :class:`NeuralRenderer` from weights exported by ``physrelight train export-renderer``
-    (safetensors with ``kind = "renderer"``, ``width``, ``depth`` and ``additive`` in its metadata), in eval mode."""
+    (safetensors with ``kind = "renderer"``, ``width``, ``depth``, ``additive`` and, when not the
+    Lambertian one, ``base`` in its metadata), in eval mode."""
     tensors, meta = ckpt.load_weights(path)
     if meta.get("kind") != "renderer":
         raise ValueError(f"{str(path)!r} holds {meta.get('kind')!r} weights, not a neural renderer")
-    net = NeuralRenderer(int(meta["width"]), int(meta["depth"]), meta.get("additive", "1") == "1")
+    net = NeuralRenderer(int(meta["width"]), int(meta["depth"]), meta.get("additive", "1") == "1",
+                         meta.get("base", "lambertian"))
     net.load_state_dict(tensors)
     return net.eval()
 

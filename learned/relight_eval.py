@@ -24,7 +24,8 @@ The protocol (shared with the benchmark):
 Methods: ``proposed`` (decomposition + ShadowNet + neural renderer), ``lambertian_sh``
 (``albedo * shading(n; target)``, the InverseRenderNet-style relighting),
 ``shadownet_lambertian`` (times ShadowNet's target shadow) and ``identity`` (the source
-photo unchanged: what doing nothing scores). Optionally ``reference``: the ``proposed`` of a
+photo unchanged: what doing nothing scores); on request ``quotient`` (the photo times the shading
+ratio, :mod:`physrelight.quotient`, the estimated track). Optionally ``reference``: the ``proposed`` of a
 second pipeline (another weights folder) on the same cases, so that two pipelines are compared
 case by case with the same interval (``train evaluate-relight --reference-weights``).
 
@@ -53,7 +54,8 @@ from .data import evenly_spread, load_photo
 __all__ = ["METHODS", "case_batches", "evaluate_relight", "format_table", "informative_target", "relight_cases",
            "relit_scores"]
 
-METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity")
+METHODS = ("proposed", "lambertian_sh", "shadownet_lambertian", "identity", "quotient")
+DEFAULT_METHODS = METHODS[:4]  # what evaluate_relight scores unless told: the figures of docs/learned.md
 _REPORTED = (*METHODS, "reference")  # what a result may hold: the methods and a second pipeline's proposed
 
 Relight = Callable[..., dict[str, torch.Tensor]]
@@ -132,7 +134,7 @@ def case_batches(ds: SynthDataset, cases: list, res: int = 64, batch_size: int =
 
 
 def evaluate_relight(relight: Relight, root: str | Path, split: str = "all", res: int = 64,
-                     max_cases: int | None = None, methods: tuple[str, ...] = METHODS, batch_size: int = 16,
+                     max_cases: int | None = None, methods: tuple[str, ...] = DEFAULT_METHODS, batch_size: int = 16,
                      progress: bool = False, reference: Relight | None = None) -> dict[str, dict[str, float] | float]:
     """Relighting metrics of each method over the held-out cases.
 

@@ -369,7 +369,8 @@ class Relighter:
             s = torch.ones_like(out["shadow"])
         else:
             s = repair_top_rows(self.shadow_net(out["normals"], tgt))
-        if method in ("quotient", "quotient_shadownet"):
+        quotient_based = method == "proposed" and getattr(self.renderer, "base", "lambertian") == "quotient"
+        if method in ("quotient", "quotient_shadownet") or quotient_based:
             src = source * scale if known_source else out["lighting"]
             src_shadow = out["shadow"] if method == "quotient_shadownet" else None
             t_sun = None if target_sun is None else batch_sh(target_sun, "target_sun") * scale
@@ -381,6 +382,13 @@ class Relighter:
                                      target_shadow=s if method == "quotient_shadownet" else None,
                                      source_sun=s_sun, target_sun=t_sun, sun_cosine=t_sun is not None,
                                      smooth_radius=self.ratio_radius)
+        if quotient_based:
+            from .neural_renderer import render_relit
+
+            # the renderer on top of the physical core: a learned gain on the quotient image
+            relit = render_relit(self.renderer, image.float(), sky.bool(), out, tgt, s, quotient=relit)
+        elif method in ("quotient", "quotient_shadownet"):
+            pass
         elif method == "proposed" and self.renderer is not None:
             from .neural_renderer import render_relit
 

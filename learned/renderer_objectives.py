@@ -43,6 +43,7 @@ import torch
 import torch.nn.functional as F
 
 from physrelight import camera, colour, image_model, losses, metrics, sh
+from physrelight.quotient import SMOOTH_RADIUS, quotient_relight
 
 from .data import Batch
 from .discriminators import MultiscaleDiscriminator, feature_matching_loss, lsgan_loss
@@ -166,7 +167,15 @@ def renderer_losses(renderer: NeuralRenderer, discriminator: MultiscaleDiscrimin
     a, n, s, L = (decomposition[k] for k in ("albedo", "normals", "shadow", "lighting"))
     terms: dict[str, torch.Tensor] = {}
 
-    x_self = renderer_inputs(image, sky, a, n, s, L, L, decomposition["self_shadow"])
+    quotient_based = getattr(renderer, "base", "lambertian") == "quotient"
+
+    def quotient(target_lighting: torch.Tensor) -> torch.Tensor | None:
+        """The quotient image the Relighter hands a quotient-based renderer (None for the Lambertian one)."""
+        if not quotient_based:
+            return None
+        return quotient_relight(image, n, L, target_lighting, mask=~sky, smooth_radius=SMOOTH_RADIUS)
+
+    x_self = renderer_inputs(image, sky, a, n, s, L, L, decomposition["self_shadow"], quotient(L))
     out_self = torch.where(sky, image, renderer(x_self))
     terms["self_lab"] = losses.lab_l2(out_self, image, fg)
     terms["self_ssim"] = 1.0 - metrics.ssim(_ldr(out_self), _ldr(image), fg)
@@ -175,7 +184,8 @@ def renderer_losses(renderer: NeuralRenderer, discriminator: MultiscaleDiscrimin
     L_cross = sh.rotate(batch.partner(L), rotation.to(L.dtype))
     with torch.no_grad():
         s_cross = shadow_net(n, L_cross)
-    out_cross = torch.where(sky, image, renderer(renderer_inputs(image, sky, a, n, s, L, L_cross, s_cross)))
+    out_cross = torch.where(sky, image, renderer(renderer_inputs(image, sky, a, n, s, L, L_cross, s_cross,
+                                                                 quotient(L_cross))))
     pred = _match_scale(out_cross, target, mask) if cross_match_scale else out_cross
     pred_d, mask_d = downsample_masked(pred, mask, cross_scale)
     tgt_d, _ = downsample_masked(target, mask, cross_scale)

@@ -43,7 +43,7 @@ from .data import Batch, PairSampler
 from .discriminators import MultiscaleDiscriminator
 from .lighting import WEIGHTS_DIR, load_prior
 from .networks import count_parameters, load_inverse, load_shadow
-from .neural_renderer import NeuralRenderer
+from .neural_renderer import BASES, NeuralRenderer
 from .objectives import decompose_and_solve
 from .relight_eval import evaluate_relight, load_case, relight_cases
 from .relighter import Relighter
@@ -75,6 +75,7 @@ class RendererConfig(RunConfig):
     cross_scale: int = 4
     cross_match_scale: bool = True
     additive: bool = True
+    base: str = "lambertian"
     lr: float = 5e-4
     lr_d: float = 2e-4
     seed: int = 0
@@ -90,6 +91,8 @@ class RendererConfig(RunConfig):
         self.check_common(("width", "depth", "d_width", "res", "batch", "steps", "cross_scale", "val_every",
                            "val_images", "ckpt_every", "log_every", "threads"), ("lr", "lr_d"),
                           RendererWeights().as_dict())
+        if self.base not in BASES:
+            raise ValueError(f"base must be one of {BASES}, got {self.base!r}")
         if isinstance(self.phase1_steps, bool) or not isinstance(self.phase1_steps, int) or self.phase1_steps < 0:
             raise ValueError(f"phase1_steps must be a non-negative integer, got {self.phase1_steps!r}")
 
@@ -101,8 +104,11 @@ class DecompositionCache:
     ``self_shadow`` (ShadowNet on the photo's own lighting). About 130 kB a photo at 64 px.
     """
 
-    def __init__(self, inverse: nn.Module, shadow_net: nn.Module, prior) -> None:
-        self.inverse, self.shadow_net, self.prior = inverse, shadow_net, prior
+    def __init__(self, inverse: nn.Module, shadow_net: nn.Module, prior, relighter: Relighter | None = None) -> None:
+        # With ``relighter``, each photo is decomposed as the Relighter does at inference
+        # (:meth:`Relighter.decompose_linear`: its source-lighting estimate, the top rows repaired),
+        # so a quotient-based renderer trains on the quotient images it will be given.
+        self.inverse, self.shadow_net, self.prior, self.relighter = inverse, shadow_net, prior, relighter
         self._cache: dict[tuple[str, int, int], dict[str, torch.Tensor]] = {}
 
     @torch.no_grad()
@@ -111,7 +117,10 @@ class DecompositionCache:
         items = []
         for j, key in enumerate(batch.keys):
             if key not in self._cache:
-                d = decompose_and_solve(self.inverse, batch.image[j:j + 1], batch.sky[j:j + 1], self.prior)
+                if self.relighter is not None:
+                    d = self.relighter.decompose_linear(batch.image[j:j + 1], batch.sky[j:j + 1])
+                else:
+                    d = decompose_and_solve(self.inverse, batch.image[j:j + 1], batch.sky[j:j + 1], self.prior)
                 d["self_shadow"] = self.shadow_net(d["normals"], d["lighting"])
                 self._cache[key] = {k: d[k][0] for k in ("albedo", "normals", "shadow", "lighting", "self_shadow")}
             items.append(self._cache[key])
@@ -127,7 +136,7 @@ def _frozen(net: nn.Module) -> nn.Module:
 def build_models(config: RendererConfig) -> nn.ModuleDict:
     """Generator ``g`` (:class:`NeuralRenderer`) and discriminator ``d``, initialised from the seed."""
     torch.manual_seed(config.seed)
-    return nn.ModuleDict({"g": NeuralRenderer(config.width, config.depth, config.additive),
+    return nn.ModuleDict({"g": NeuralRenderer(config.width, config.depth, config.additive, config.base),
                           "d": MultiscaleDiscriminator(3, config.d_width, layers=3, scales=2)})
 
 
@@ -140,7 +149,8 @@ def train_renderer(config: RendererConfig) -> dict[str, Any]:
     inverse = _frozen(load_inverse(config.inverse or WEIGHTS_DIR / "inverse.safetensors"))
     shadow_net = _frozen(load_shadow(config.shadow or WEIGHTS_DIR / "shadow.safetensors"))
     sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed)
-    cache = DecompositionCache(inverse, shadow_net, prior)
+    cache = DecompositionCache(inverse, shadow_net, prior,
+                               Relighter(inverse, shadow_net, prior, config.res) if config.base == "quotient" else None)
     weights = RendererWeights(**config.weights)
 
     models = build_models(config)
@@ -210,6 +220,8 @@ def validate(renderer: NeuralRenderer, inverse: nn.Module, shadow_net: nn.Module
     pipe = Relighter(inverse, shadow_net, prior, config.res, renderer)
     root = config.val_data or config.data
     methods = ("proposed", "lambertian_sh", "shadownet_lambertian")
+    if getattr(renderer, "base", "lambertian") == "quotient":
+        methods += ("quotient",)
     result = evaluate_relight(pipe.relight_linear, root, config.val_split, config.res, config.val_images, methods)
     flat = {f"{m}_{k}": v for m in methods for k, v in result[m].items()}
     flat["cases"] = result["cases"]
@@ -248,4 +260,5 @@ def export_renderer(sidecar: str | Path, dest: str | Path) -> Path:
     if "phase1_steps" not in cfg:
         raise ValueError(f"{str(sidecar)!r} is not a renderer checkpoint")
     return ckpt.export_weights(sidecar, dest, "renderer", submodule="g",
-                               extra={"additive": "1" if cfg.get("additive", True) else "0"})
+                               extra={"additive": "1" if cfg.get("additive", True) else "0",
+                                      **({"base": cfg["base"]} if cfg.get("base", "lambertian") != "lambertian" else {})})
