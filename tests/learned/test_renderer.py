@@ -310,3 +310,44 @@ def test_10_a_target_clipped_on_the_whole_foreground_is_left_out_and_counted(tin
     assert np.isfinite(out["proposed"]["psnr"])  # without the rule: inf, and the paired bootstrap refuses
     assert all(np.isfinite(v["diff"]) for v in out["paired"]["reference"].values())
     assert "1 left out" in rev.format_table(out)
+
+
+def test_11_a_quotient_based_renderer_starts_at_the_quotient_method_and_round_trips(tiny_dataset: Path,
+                                                                                   frozen: Path,
+                                                                                   tmp_path: Path) -> None:
+    """``base="quotient"`` (issue 26): with its head at zero the renderer *is* the quotient method
+    (through the Relighter, ``proposed`` equals ``quotient``), so relighting a photo to its own
+    lighting gives the photo; the 17th-channel input is required and checked; a tiny run trains,
+    exports with its base in the metadata, and loads back as a quotient-based renderer."""
+    run = tmp_path / "run"
+    train_renderer(config(tiny_dataset, run, frozen, steps=3, ckpt_every=3, phase1_steps=3, base="quotient",
+                          additive=False))
+    dest = export_renderer(ckpt.latest_checkpoint(run), tmp_path / "w" / "renderer.safetensors")
+    assert ckpt.load_weights(dest)[1]["base"] == "quotient"
+    net = load_renderer(dest)
+    assert net.base == "quotient" and net.in_channels == 17
+    for f in ("inverse.safetensors", "shadow.safetensors", "lighting_prior.npz"):
+        shutil.copy(frozen / f, tmp_path / "w" / f)
+    pipe = Relighter.load(tmp_path / "w")
+    batch = PairSampler(tiny_dataset, split="all", res=24).batch(1, 0)
+    image, sky = batch.image[:1], batch.sky[:1]
+    dec = pipe.decompose_linear(image, sky)
+    target = dec["lighting"].flip(1).abs()
+    trained = pipe.relight_linear(image, sky, target, None, "proposed")["relit"]
+    quotient = pipe.relight_linear(image, sky, target, None, "quotient")["relit"]
+    assert not torch.equal(trained, quotient)  # the trained gain acts
+    torch.nn.init.zeros_(pipe.renderer.unet.head.weight)
+    torch.nn.init.zeros_(pipe.renderer.unet.head.bias)
+    fg = (~sky).expand_as(image)
+    torch.testing.assert_close(pipe.relight_linear(image, sky, target, None, "proposed")["relit"][fg],
+                               positive(quotient)[fg])
+    own = pipe.relight_linear(image, sky, dec["lighting"], None, "proposed")["relit"]
+    torch.testing.assert_close(own[fg], positive(image)[fg])
+    # the quotient image is required by a quotient-based renderer and refused by a Lambertian one
+    with pytest.raises(ValueError, match="needs quotient"):
+        render_relit(pipe.renderer, image, sky, dec, target, torch.ones_like(sky, dtype=image.dtype))
+    with pytest.raises(ValueError, match="takes no quotient"):
+        render_relit(NeuralRenderer(4, 2), image, sky, dec, target, torch.ones_like(sky, dtype=image.dtype),
+                     quotient=image)
+    with pytest.raises(ValueError, match="base"):
+        NeuralRenderer(4, 2, base="phong")
