@@ -1,0 +1,71 @@
+"""Study 29: a quotient-based neural renderer against the quotient method, with the bench's pairs and l1.
+
+``proposed`` is the bench's method as ``bench`` builds it (:func:`validation.bench.methods.build_methods`)
+with the candidate renderer loaded (``Relighter.load(renderer=...)``); ``quotient`` is the bench's
+(estimated track, the sun by its exact cosine). Also reported, not part of the rule: ``proposed_sun``
+(the renderer given the quotient image with the sun's exact cosine, as ``quotient`` has it).
+
+    .venv/bin/python docs/experiments/scripts/29_quotient_renderer_bench.py DATA RENDERER -o OUT.json   (1 thread)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+import torch
+
+from learned import Relighter
+from physrelight import io
+from physrelight.stats import paired_bootstrap
+from validation.bench.data import load_dataset
+from validation.bench.methods import build_methods
+from validation.bench.protocols import cross_pairs
+from validation.bench.scores import score
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("data")
+    ap.add_argument("renderer")
+    ap.add_argument("-o", "--out", required=True)
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    t0 = time.time()
+    views = load_dataset(args.data, with_physical=False)
+    pairs = cross_pairs(views)
+    r = Relighter.load(renderer=args.renderer)
+    ms = build_methods(r)
+
+    def proposed_sun(p):
+        image = p.image()
+        return r.relight_full_resolution(image, p.sky(), p.target_lighting(), source_lighting=p.source_lighting(),
+                                         method="proposed", working_res=min(image.shape[-2:]),
+                                         target_sun=p.sun_lighting(p.target))["relit"]
+
+    methods = {"proposed": ms["proposed"], "quotient": ms["quotient"], "proposed_sun": proposed_sun}
+    l1 = {}
+    with torch.no_grad():
+        for name, fn in methods.items():
+            preds, T, M = [], [], []
+            for p in pairs:
+                fg, tgt = p.foreground(), p.target_display()
+                preds.append(torch.where(fg, p.display(fn(p)), tgt))
+                T.append(tgt)
+                M.append(fg)
+            l1[name] = score(preds, T, M, which=("l1",))["l1"]
+    groups = np.asarray([p.view.scene for p in pairs])
+    out = {"data": args.data, "renderer": args.renderer, "pairs": len(pairs),
+           "l1": {k: float(v.mean()) for k, v in l1.items()},
+           "proposed_minus_quotient": paired_bootstrap(l1["proposed"], l1["quotient"], groups=groups, seed=0)._asdict(),
+           "proposed_sun_minus_quotient": paired_bootstrap(l1["proposed_sun"], l1["quotient"], groups=groups,
+                                                           seed=0)._asdict(),
+           "seconds": round(time.time() - t0, 1)}
+    io.write_json(args.out, out)
+    print(json.dumps(out, indent=1, default=float))
+
+
+if __name__ == "__main__":
+    main()
