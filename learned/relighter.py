@@ -38,6 +38,10 @@ from .networks import InverseNet, ShadowNet, repair_top_rows
 from .objectives import decompose_and_solve
 from .source_lighting import SourceLightingConfig, solve_source_lighting
 
+DEFAULT_METHOD = "proposed"
+"""The method of ``relight`` and the command line unless told: the shipped renderer on top of the quotient
+image, which beat ``quotient`` on both held-out sets (docs/experiments/29-renderer-on-the-quotient.md)."""
+
 __all__ = ["DEFAULT_FOV_DEG", "LIGHTING_ESTIMATORS", "RELIGHT_METHODS", "SKY_SOURCES", "SKY_TYPES", "WEIGHT_FILES", "Relighter", "dc_luminance",
            "envmap_sun", "estimate_pitch", "exposure_scale", "fill_weights_folder", "match_exposure", "rotate_azimuth", "sky_map_kind",
            "sun_lighting", "sun_sky_map", "target_sky", "transfer_to_full_resolution", "working_resolution"]
@@ -297,7 +301,7 @@ class Relighter:
 
     @torch.no_grad()
     def relight_linear(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
-                       source_lighting: torch.Tensor | None = None, method: str = "quotient",
+                       source_lighting: torch.Tensor | None = None, method: str = DEFAULT_METHOD,
                        decomposition: dict[str, torch.Tensor] | None = None,
                        known_source: bool = False, *, target_sun: torch.Tensor | None = None,
                        source_sun: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
@@ -401,7 +405,7 @@ class Relighter:
 
     @torch.no_grad()
     def relight_full_resolution(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
-                                source_lighting: torch.Tensor | None = None, method: str = "quotient",
+                                source_lighting: torch.Tensor | None = None, method: str = DEFAULT_METHOD,
                                 working_res: int | None = None,
                                 decomposition: dict[str, torch.Tensor] | None = None,
                                 known_source: bool = False, **sun: torch.Tensor | None) -> dict[str, Any]:
@@ -453,7 +457,7 @@ class Relighter:
         return torch.where(sky, painted, relit)
 
     def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
-                method: str = "quotient", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
+                method: str = DEFAULT_METHOD, azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
                 seed: int = 0, sky_source: str | None = None, exposure: str | float = "keep",
                 fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None, source: Any = None) -> Any:
         """Relight a photo of any size to a target lighting; the relit photo only.
@@ -471,7 +475,7 @@ class Relighter:
         return _give_back(torch.cat(frames), kind)
 
     def relight_sequence(self, image: Any, target: Any, azimuths_deg: Any, world_to_camera: Any = None,
-                         sky_mask: Any = None, method: str = "quotient", sky: str = "clear", new_sky: bool = True,
+                         sky_mask: Any = None, method: str = DEFAULT_METHOD, sky: str = "clear", new_sky: bool = True,
                          seed: int = 0, progress: bool = False, sky_source: str | None = None,
                          exposure: str | float = "keep", fov_deg: float = DEFAULT_FOV_DEG,
                          pitch_deg: float | None = None, source: Any = None) -> list[Any]:
@@ -493,7 +497,7 @@ class Relighter:
                 for a in tqdm(azimuths, desc="relight", disable=not progress)]
 
     def relight_layers(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
-                       method: str = "quotient", azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
+                       method: str = DEFAULT_METHOD, azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
                        seed: int = 0, sky_source: str | None = None, exposure: str | float = "keep",
                        fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None,
                        source: Any = None) -> dict[str, np.ndarray]:

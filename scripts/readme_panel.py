@@ -6,7 +6,7 @@ Rows: scikit-image's ``rocket.jpg`` (a real dusk photo; the test extra installs 
 three crops of the held-out panorama ``sunrise.exr`` (bench --real's crops 0, 5 and 10 of 16,
 seed 0), each as an 8-bit photo. Columns: input | relit to the shipped forest HDRI | to a low clear
 sun (10 degrees up, 60 to the right) | to an overcast sky. Every relighting is what the command line
-gives with its defaults (``--method quotient --exposure auto``, the target's own sky, the field of
+gives with its defaults (``--method proposed --exposure auto``, the target's own sky, the field of
 view 60 degrees for the rocket and the crop's own for the crops, the pitch estimated from the sky).
 No ground truth: for the eye. The machine and the seconds go to stdout.
 """
@@ -57,7 +57,7 @@ def main() -> None:
         for target, kw in targets:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)
-                row.append(relighter.relight(photo, target, method="quotient", exposure="auto", fov_deg=fov, **kw))
+                row.append(relighter.relight(photo, target, method="proposed", exposure="auto", fov_deg=fov, **kw))
         rows.append((name, row))
     h = max(r[0].shape[0] / r[0].shape[1] for _, r in rows)
     fig, axes = plt.subplots(len(rows), len(COLUMNS), figsize=(3.0 * len(COLUMNS), 3.0 * h * len(rows) + 0.6),

@@ -37,7 +37,7 @@ REFERENCE = Path(__file__).with_name("data") / "relight_reference.npz"
 REF_SUN = (35.0, 40.0)
 REF_YAW, REF_PITCH, REF_AZIMUTH = 25.0, -10.0, 30.0
 # What `physrelight relight` passes that the Python API does not default to (its --method and --exposure).
-CLI_DEFAULTS = dict(method="quotient", exposure="auto")
+CLI_DEFAULTS = dict(method="proposed", exposure="auto")
 
 
 # ----------------------------------------------------------------------------- inputs built here

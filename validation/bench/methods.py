@@ -125,7 +125,7 @@ class Learned:
             raise ValueError(f"method must be one of {LEARNED}, got {method!r}")
         if known_source and not method.startswith("quotient"):
             raise ValueError(f"known_source is a track of the quotient methods, not of {method!r}")
-        if sun and not method.startswith("quotient"):
+        if sun and not (method.startswith("quotient") or _quotient_based(relighter, method)):
             raise ValueError(f"sun (the sun's exact cosine) is an option of the quotient methods, not of {method!r}")
         self.relighter, self.method, self.res, self.known_source, self.sun = relighter, method, res, known_source, sun
         self.name = name or (f"{method}_known" if known_source else method) + ("_sun" if sun else "")
@@ -242,9 +242,17 @@ class AnalysisBySynthesis:
         return float(np.median(self.fit_seconds) + (np.median(self.render_seconds) if self.render_seconds else 0.0))
 
 
+def _quotient_based(relighter: Any, method: str) -> bool:
+    """``proposed`` with a renderer on top of the quotient image (``NeuralRenderer(base="quotient")``)."""
+    return method == "proposed" and getattr(getattr(relighter, "renderer", None), "base", "lambertian") == "quotient"
+
+
 def build_methods(relighter: Any) -> dict[str, Callable[[Pair], torch.Tensor]]:
     """The standard methods (:data:`METHODS`), keyed by name."""
     out: dict[str, Callable[[Pair], torch.Tensor]] = {m: Learned(relighter, m) for m in LEARNED}
+    # A quotient-based renderer is handed the quotient image relight gives it: the sun by its exact cosine.
+    if _quotient_based(relighter, "proposed"):
+        out["proposed"] = Learned(relighter, "proposed", sun=True, name="proposed")
     # The quotient methods as relight runs them: a target with a sun has it shaded by its exact cosine.
     out["quotient"] = Learned(relighter, "quotient", sun=True, name="quotient")
     out["quotient_known"] = Learned(relighter, "quotient", known_source=True, sun=True, name="quotient_known")

@@ -19,7 +19,7 @@ from .real_metrics import BOUNDARY_TOLERANCE, ESTIMATES, SEGMENTERS, SELF_METHOD
 GROUP_TITLES = {"heldout": "held out (sunrise)", "training": "training side (seen in training)",
                 "indoor": "indoor stress case (studio)", "user": "your panoramas"}
 PANEL_COLUMNS = 4
-RELIGHT_DEFAULTS = dict(method="quotient", exposure="auto")
+RELIGHT_DEFAULTS = dict(method="proposed", exposure="auto")
 """What `physrelight relight` passes by default that the Python API does not."""
 TRAINED = ("The training-side panoramas (city, courtyard, forest) are in the lighting prior's samples "
            "(`learned/lighting.py`) and in synth's HDRI lightings, so in the training renders of every shipped "
