@@ -88,11 +88,12 @@ REF_LAYERS = ("relit", "shadow", "target_shadow", "relit_quotient")
 
 def _reference_layers(relighter, photo: np.ndarray) -> dict[str, np.ndarray]:
     """The shipped pipeline on the reference input: ``relit``, ``shadow``, ``target_shadow`` of the
-    neural-renderer path (segmenter, ShadowNet, renderer, the target's sky) and ``relit_quotient`` of
-    the default method (quotient relighting, the sun shaded by its exact cosine)."""
+    neural-renderer path (segmenter, ShadowNet, the renderer on the quotient image, the target's sky;
+    the default method) and ``relit_quotient`` of the physical core alone (quotient relighting, the
+    sun shaded by its exact cosine)."""
     kw = dict(world_to_camera=_world_to_camera(REF_YAW, REF_PITCH), azimuth_deg=REF_AZIMUTH, seed=0)
     out = relighter.relight_layers(photo, _sun(*REF_SUN), method="proposed", **kw)
-    out["relit_quotient"] = relighter.relight_layers(photo, _sun(*REF_SUN), **kw)["relit"]
+    out["relit_quotient"] = relighter.relight_layers(photo, _sun(*REF_SUN), method="quotient", **kw)["relit"]
     return out
 
 
