@@ -323,8 +323,13 @@ def test_07_the_renderer_is_fed_the_target_shadow_not_the_source_shadow(relighte
     x = seen[0]
     fg = (~small_sky).float()
     # Channel 9 is the shadow (learned.neural_renderer.CHANNELS), zeroed on the sky.
-    assert x.shape[1] == 14 and CHANNELS.index("shadow") == 9
+    assert x.shape[1] == relighter.renderer.in_channels and CHANNELS.index("shadow") == 9
     torch.testing.assert_close(x[:, 9:10], out["target_shadow"] * fg)
+    if relighter.renderer.base == "quotient":
+        # channels 14-16: the quotient image of the same target, which the renderer's gain multiplies
+        assert x.shape[1] == 17
+        quotient = relighter.relight_linear(small, small_sky, target, method="quotient")["relit"]
+        torch.testing.assert_close(x[:, 14:17], quotient * fg)
     # ... and the source shadow is a different map here, so the check has teeth.
     assert float(((out["target_shadow"] - out["shadow"]).abs() * fg).sum() / fg.sum()) > 0.05
     # The target shadow is ShadowNet's on the decomposition's normals for the (exposure-matched) target,
