@@ -6,8 +6,9 @@ hazy sky, the shipped forest HDRI turned 120 degrees). The source photo is relit
 target with the shipped weights, following the benchmark protocol (docs/bench.md): the
 target keeps the source photo's exposure, the networks get the target's SH in the source
 photo's units, and the result is compared on the foreground with the path-traced target.
-Methods: ``quotient`` (the default: the photo times the ratio of target to estimated source
-shading), ``proposed`` (the neural renderer), ``lambertian_sh`` (the decomposition times the
+Methods: ``proposed`` (the default: the shipped neural renderer, a learned gain on the quotient
+image), ``quotient`` (the photo times the ratio of target to estimated source shading),
+``lambertian_sh`` (the decomposition times the
 target SH shading) and ``identity`` (the photo unchanged). A real photo that ships with
 scikit-image (``rocket.jpg``) is relit too (no ground truth: for the eye).
 
@@ -27,7 +28,7 @@ from physrelight import colour, io, metrics
 
 __all__ = ["METHODS", "run"]
 
-METHODS = ("quotient", "proposed", "lambertian_sh", "identity")
+METHODS = ("proposed", "quotient", "lambertian_sh", "identity")
 HDRI_DIR = Path(__file__).resolve().parents[1] / "physrelight" / "data" / "hdri"
 
 
@@ -104,7 +105,7 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
         target = colour.to_ldr(_chw(sc["lights"][name]["radiance"] * gain))
         preds = {"identity": photo}
         seconds = {"identity": 0.0}
-        for method in ("quotient", "proposed", "lambertian_sh"):
+        for method in ("proposed", "quotient", "lambertian_sh"):
             t = time.perf_counter()
             relit = relighter.relight_full_resolution(
                 lin, sky, torch.from_numpy(sc["lights"][name]["sh"] * gain).float(),
@@ -117,16 +118,16 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
             entry[method] = {"l1": float(metrics.l1(p, target, fg)), "psnr": float(metrics.psnr(p, target, fg)),
                              "ssim": float(metrics.ssim(p, target, fg)), "seconds": seconds[method]}
         results["targets"][name] = entry
-        rows.append((name, [photo, target, preds["quotient"], preds["proposed"]]))
+        rows.append((name, [photo, target, preds["proposed"], preds["quotient"]]))
 
     log("[3/3] a real photo (scikit-image's rocket.jpg), no ground truth")
     real = _real_photo()
     real_row = None
     if real is not None:
-        forest = relighter.relight(real, HDRI_DIR / "forest.exr", method="quotient", exposure="auto")
+        forest = relighter.relight(real, HDRI_DIR / "forest.exr", method="proposed", exposure="auto")
         from learned.relight_cli import sun_direction
 
-        low_sun = relighter.relight(real, sun_direction(10.0, 60.0), method="quotient", exposure="auto")
+        low_sun = relighter.relight(real, sun_direction(10.0, 60.0), method="proposed", exposure="auto")
         real_row = [real, forest, low_sun]
         results["real_photo"] = {"name": "skimage rocket.jpg", "shape": list(real.shape),
                                  "targets": ["forest HDRI", "clear sky, sun 10 deg, azimuth 60 deg"]}
@@ -152,7 +153,7 @@ def _panel(path: Path, source: str, rows: list, real_row: list | None) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    cols = ["photo (source)", "path-traced target", "quotient (default)", "proposed"]
+    cols = ["photo (source)", "path-traced target", "proposed (default)", "quotient"]
     n = len(rows) + (1 if real_row is not None else 0)
     fig, axes = plt.subplots(n, 4, figsize=(2.4 * 4, 2.5 * n), squeeze=False)
     for r, (name, imgs) in enumerate(rows):
