@@ -318,9 +318,10 @@ class Relighter:
                 source / ``target``, i.e. the photo keeps its exposure and only the lighting's
                 shape changes). An estimate without a positive DC term (no usable foreground)
                 takes the lighting prior's mean level instead.
-            method: ``"quotient"`` (the default: on ``bench --full`` it is at least as accurate as
-                the neural renderer and faster, docs/bench.md), ``"proposed"`` (the neural renderer; ``"shadownet_lambertian"`` when no
-                renderer weights are loaded), ``"lambertian_sh"`` (``albedo * shading(n; target)``,
+            method: ``"proposed"`` (the default, :data:`DEFAULT_METHOD`: the neural renderer; the
+                shipped one is a learned gain on the ``"quotient"`` image, given ShadowNet's target
+                shadow, docs/experiments/29-renderer-on-the-quotient.md; ``"shadownet_lambertian"``
+                when no renderer weights are loaded), ``"lambertian_sh"`` (``albedo * shading(n; target)``,
                 the InverseRenderNet-style baseline), ``"shadownet_lambertian"`` (times
                 ShadowNet's shadow for the target), ``"quotient"`` (the photo times
                 ``shading(n; target) / shading(n; source)``, :mod:`physrelight.quotient`: the

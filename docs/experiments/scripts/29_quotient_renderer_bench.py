@@ -6,6 +6,8 @@ with the candidate renderer loaded (``Relighter.load(renderer=...)``); ``quotien
 (the renderer given the quotient image with the sun's exact cosine, as ``quotient`` has it).
 
     .venv/bin/python docs/experiments/scripts/29_quotient_renderer_bench.py DATA RENDERER -o OUT.json   (1 thread)
+    ... --known: the known track instead: ``proposed_known`` (the renderer's gain on the quotient image
+    that divides by the given source lighting) against the bench's ``quotient_known``.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ def main() -> None:
     ap.add_argument("data")
     ap.add_argument("renderer")
     ap.add_argument("-o", "--out", required=True)
+    ap.add_argument("--known", action="store_true", help="score the known track (proposed_known vs quotient_known)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     t0 = time.time()
@@ -45,7 +48,17 @@ def main() -> None:
                                          method="proposed", working_res=min(image.shape[-2:]),
                                          target_sun=p.sun_lighting(p.target))["relit"]
 
-    methods = {"proposed": ms["proposed"], "quotient": ms["quotient"], "proposed_sun": proposed_sun}
+    def proposed_known(p):
+        image = p.image()
+        return r.relight_full_resolution(image, p.sky(), p.target_lighting(), source_lighting=p.source_lighting(),
+                                         method="proposed", working_res=min(image.shape[-2:]), known_source=True,
+                                         target_sun=p.sun_lighting(p.target),
+                                         source_sun=p.sun_lighting(p.source))["relit"]
+
+    if args.known:
+        methods = {"proposed_known": proposed_known, "quotient_known": ms["quotient_known"]}
+    else:
+        methods = {"proposed": ms["proposed"], "quotient": ms["quotient"], "proposed_sun": proposed_sun}
     l1 = {}
     with torch.no_grad():
         for name, fn in methods.items():
@@ -58,11 +71,16 @@ def main() -> None:
             l1[name] = score(preds, T, M, which=("l1",))["l1"]
     groups = np.asarray([p.view.scene for p in pairs])
     out = {"data": args.data, "renderer": args.renderer, "pairs": len(pairs),
-           "l1": {k: float(v.mean()) for k, v in l1.items()},
-           "proposed_minus_quotient": paired_bootstrap(l1["proposed"], l1["quotient"], groups=groups, seed=0)._asdict(),
-           "proposed_sun_minus_quotient": paired_bootstrap(l1["proposed_sun"], l1["quotient"], groups=groups,
-                                                           seed=0)._asdict(),
-           "seconds": round(time.time() - t0, 1)}
+           "l1": {k: float(v.mean()) for k, v in l1.items()}}
+    if args.known:
+        out["proposed_known_minus_quotient_known"] = paired_bootstrap(l1["proposed_known"], l1["quotient_known"],
+                                                                      groups=groups, seed=0)._asdict()
+    else:
+        out["proposed_minus_quotient"] = paired_bootstrap(l1["proposed"], l1["quotient"], groups=groups,
+                                                          seed=0)._asdict()
+        out["proposed_sun_minus_quotient"] = paired_bootstrap(l1["proposed_sun"], l1["quotient"], groups=groups,
+                                                              seed=0)._asdict()
+    out["seconds"] = round(time.time() - t0, 1)
     io.write_json(args.out, out)
     print(json.dumps(out, indent=1, default=float))
 
