@@ -22,8 +22,8 @@ photo by the ratio of the target's shading to the photo's own: its albedo is nev
 The default method, ``proposed``, is the shipped neural renderer on top of it: a learned gain on
 that quotient image, given ShadowNet's shadow for the target. Without ``--source-env``/``--source-sh``
 the photo's lighting is the decomposition's estimate; with them (the photo's own lighting,
-captured on set) it is that lighting, the method is ``quotient``, and relighting to it gives
-the photo back.
+captured on set) the quotient divides by that lighting (``--method quotient``: relighting to it
+gives the photo back exactly).
 
 The sky (white = sky in ``--mask``) is found by the shipped segmenter, kept only where it is a
 plausible sky; when there is none a one-line warning says why and only the foreground is
@@ -146,12 +146,10 @@ def _relight(args: argparse.Namespace) -> int:
     if args.sky is not None and args.sun is None:
         raise ValueError("--sky chooses the sky of a --sun target; an --env or --sh target brings its own")
     if args.source_env is not None or args.source_sh is not None:
-        # The known-source track is measured for the quotient methods (bench: quotient_known); the
-        # renderer was trained on the estimated track's quotient images, so a given source means quotient.
-        if args.method is None:
-            args.method = "quotient"
-        elif not args.method.startswith("quotient"):
-            raise ValueError("--source-env/--source-sh need a quotient method (--method quotient)")
+        # The known-source track: the quotient divides by the given lighting (bench: quotient_known, and
+        # proposed_known for the shipped renderer on top of it, study 29); resynthesis methods cannot use it.
+        if args.method is not None and not (args.method.startswith("quotient") or args.method == "proposed"):
+            raise ValueError("--source-env/--source-sh need --method proposed or a quotient method")
     if args.method is None:
         from .relighter import DEFAULT_METHOD
 
@@ -259,7 +257,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fps", type=positive_number, default=12.0, help="GIF frame rate (default: 12)")
     p.add_argument("--method", choices=RELIGHT_METHODS, default=None,
                    help="relighting method (default: proposed, the neural renderer on top of the quotient image; "
-                        "quotient, the physical method alone, with --source-env/--source-sh)")
+                        "quotient is the physical method alone)")
     p.add_argument("--weights", default=None, help="weights folder (default: the shipped ones)")
     p.add_argument("--threads", type=positive_int, default=2, help="torch CPU threads (default: 2)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

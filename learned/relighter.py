@@ -368,6 +368,10 @@ class Relighter:
         source = None if source_lighting is None else batch_sh(source_lighting, "source_lighting")
         if known_source and source is None:
             raise ValueError("known_source needs source_lighting: the photo's own lighting")
+        if known_source and not (method.startswith("quotient") or (
+                method == "proposed" and getattr(self.renderer, "base", "lambertian") == "quotient")):
+            raise ValueError(f"known_source is a track of the quotient methods and of a quotient-based renderer, "
+                             f"not of {method!r}")
         scale = exposure_scale(tgt, out["lighting"], source, fallback=self.prior.mean.reshape(1, 9, 3))[:, None, None]
         tgt = tgt * scale
         if method == "lambertian_sh" or method == "quotient":

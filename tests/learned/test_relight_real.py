@@ -233,7 +233,7 @@ def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, 
         (tmp_path / "L").write_text("a file")
         args += ["--layers", str(tmp_path / "L")]
     elif case == "source_without_quotient":
-        args += ["--source-env", str(FOREST), "--method", "proposed"]
+        args += ["--source-env", str(FOREST), "--method", "lambertian_sh"]
     if case in ("fps", "sky_grow"):
         with pytest.raises(SystemExit) as exit_:
             _cli(args, capsys)

@@ -343,9 +343,16 @@ def test_11_a_quotient_based_renderer_starts_at_the_quotient_method_and_round_tr
                                positive(quotient)[fg])
     own = pipe.relight_linear(image, sky, dec["lighting"], None, "proposed")["relit"]
     torch.testing.assert_close(own[fg], positive(image)[fg])
+    # the known track: the quotient divides by the given source, so relit to it the photo comes back
+    given = dec["lighting"] * 3.0
+    known = pipe.relight_linear(image, sky, given, given, "proposed", known_source=True)["relit"]
+    torch.testing.assert_close(known[fg], positive(image)[fg])
     # the quotient image is required by a quotient-based renderer and refused by a Lambertian one
     with pytest.raises(ValueError, match="needs quotient"):
         render_relit(pipe.renderer, image, sky, dec, target, torch.ones_like(sky, dtype=image.dtype))
+    pipe.renderer = NeuralRenderer(4, 2)  # a Lambertian-based renderer has no known track
+    with pytest.raises(ValueError, match="known_source"):
+        pipe.relight_linear(image, sky, given, given, "proposed", known_source=True)
     with pytest.raises(ValueError, match="takes no quotient"):
         render_relit(NeuralRenderer(4, 2), image, sky, dec, target, torch.ones_like(sky, dtype=image.dtype),
                      quotient=image)

@@ -11,9 +11,11 @@ What each one may use:
     given source lighting (``source_lighting=``); the source lighting's shape is the
     decomposition's estimate. ``quotient`` divides the photo by its estimated shading
     (:mod:`physrelight.quotient`) instead of re-synthesising it from the albedo.
-``quotient_known`` (the *known* track)
+``quotient_known``, ``proposed_known`` (the *known* track)
     quotient relighting with the given source lighting itself as the photo's shading
-    (``known_source=True``: the photo's environment map captured on set).
+    (``known_source=True``: the photo's environment map captured on set); ``proposed_known``,
+    only with a quotient-based renderer (study 29), is the renderer's gain on that quotient image.
+    With such a renderer ``proposed`` too is handed the quotient image with the sun's cosine.
 
 Both quotient methods are given the sun's part of the lightings (as ``relight`` knows it from a
 ``--sun`` target or an environment map's sun) and shade the sun by its exact clamped cosine, the
@@ -50,7 +52,7 @@ LEARNED = ("proposed", "lambertian_sh", "shadownet_lambertian", "quotient")
 ORACLES = ("oracle_sh", "oracle_sh_shadow")
 ESTIMATED_TRACK = LEARNED
 """Only the target lighting is given (its level from the given source): the paper's setting, the headline."""
-KNOWN_TRACK = ("quotient_known",)
+KNOWN_TRACK = ("quotient_known", "proposed_known")  # proposed_known: only with a quotient-based renderer
 """The photo's own lighting is given too (an environment map captured on set)."""
 METHODS = ESTIMATED_TRACK + KNOWN_TRACK + ORACLES + ("identity",)
 TRACKS = {"estimated": ESTIMATED_TRACK, "known": KNOWN_TRACK, "oracle": ORACLES, "reference": ("identity",)}
@@ -123,7 +125,7 @@ class Learned:
                  known_source: bool = False, sun: bool = False) -> None:
         if method not in LEARNED:
             raise ValueError(f"method must be one of {LEARNED}, got {method!r}")
-        if known_source and not method.startswith("quotient"):
+        if known_source and not (method.startswith("quotient") or _quotient_based(relighter, method)):
             raise ValueError(f"known_source is a track of the quotient methods, not of {method!r}")
         if sun and not (method.startswith("quotient") or _quotient_based(relighter, method)):
             raise ValueError(f"sun (the sun's exact cosine) is an option of the quotient methods, not of {method!r}")
@@ -253,10 +255,12 @@ def build_methods(relighter: Any) -> dict[str, Callable[[Pair], torch.Tensor]]:
     # A quotient-based renderer is handed the quotient image relight gives it: the sun by its exact cosine.
     if _quotient_based(relighter, "proposed"):
         out["proposed"] = Learned(relighter, "proposed", sun=True, name="proposed")
+        # ... and on the known track its quotient image divides by the given source (study 29)
+        out["proposed_known"] = Learned(relighter, "proposed", known_source=True, sun=True, name="proposed_known")
     # The quotient methods as relight runs them: a target with a sun has it shaded by its exact cosine.
     out["quotient"] = Learned(relighter, "quotient", sun=True, name="quotient")
     out["quotient_known"] = Learned(relighter, "quotient", known_source=True, sun=True, name="quotient_known")
     out["oracle_sh"] = OracleSH(None)
     out["oracle_sh_shadow"] = OracleSH("true")
     out["identity"] = Identity()
-    return {k: out[k] for k in METHODS}
+    return {k: out[k] for k in METHODS if k in out}
