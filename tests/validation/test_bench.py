@@ -15,7 +15,8 @@ import torch
 
 from physrelight.cli import main
 
-METHOD_NAMES = {"proposed", "lambertian_sh", "shadownet_lambertian", "quotient", "quotient_known", "oracle_sh",
+METHOD_NAMES = {"proposed", "lambertian_sh", "shadownet_lambertian", "quotient", "quotient_known", "proposed_known",
+                "oracle_sh",
                 "oracle_sh_shadow", "identity", "mitsuba_analysis_by_synthesis"}
 METRICS = ("l1", "mse", "ssim", "dssim", "psnr", "ciede2000", "gain_l1", "gain_ssim", "gain_psnr")
 
