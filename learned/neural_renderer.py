@@ -158,10 +158,18 @@ class NeuralRenderer(nn.Module):
         feats = [x[:, 0:6], _slog(x[:, 6:9]), x[:, 9:11], _slog(x[:, 11:14])]
         if self.base == "quotient":
             feats.append(_slog(x[:, 14:17]))
-        feats = torch.cat(feats, 1)
-        out = self.unet(feats)
+        out = self.unet(torch.cat(feats, 1))
         gain = torch.exp(out[:, 0:3].clamp(-8.0, 8.0))
         return positive(base * gain + 0.1 * out[:, 3:6]) if self.additive else positive(base * gain)
+
+    def gain(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B, 3, H, W)`` the learned gain ``exp(g)`` alone, for input ``x`` as in :meth:`forward`
+        (a gain-only renderer's output is ``positive(base * gain(x))``)."""
+        _check(x, self.in_channels, "renderer input", None)
+        feats = [x[:, 0:6], _slog(x[:, 6:9]), x[:, 9:11], _slog(x[:, 11:14])]
+        if self.base == "quotient":
+            feats.append(_slog(x[:, 14:17]))
+        return torch.exp(self.unet(torch.cat(feats, 1))[:, 0:3].clamp(-8.0, 8.0))
 
 
 def _slog(x: torch.Tensor) -> torch.Tensor:

@@ -358,3 +358,30 @@ def test_11_a_quotient_based_renderer_starts_at_the_quotient_method_and_round_tr
                      quotient=image)
     with pytest.raises(ValueError, match="base"):
         NeuralRenderer(4, 2, base="phong")
+
+
+def test_12_the_gain_ratio_variant_gives_the_quotient_when_relit_to_the_source(tiny_dataset: Path, frozen: Path,
+                                                                               tmp_path: Path) -> None:
+    """``Relighter.renderer_gain_ratio`` (study 29, off by default): the renderer's gain for the target over
+    its gain for the source, so relit to its own lighting the photo gets the quotient's ratio alone, whatever
+    the renderer learned; to another lighting it differs from the quotient."""
+    run = tmp_path / "run"
+    train_renderer(config(tiny_dataset, run, frozen, steps=3, ckpt_every=3, phase1_steps=3, base="quotient",
+                          additive=False))
+    export_renderer(ckpt.latest_checkpoint(run), tmp_path / "w" / "renderer.safetensors")
+    for f in ("inverse.safetensors", "shadow.safetensors", "lighting_prior.npz"):
+        shutil.copy(frozen / f, tmp_path / "w" / f)
+    pipe = Relighter.load(tmp_path / "w")
+    batch = PairSampler(tiny_dataset, split="all", res=24).batch(1, 0)
+    image, sky = batch.image[:1], batch.sky[:1]
+    dec = pipe.decompose_linear(image, sky)
+    fg = (~sky).expand_as(image)
+    plain_self = pipe.relight_linear(image, sky, dec["lighting"], None, "proposed")["relit"]
+    pipe.renderer_gain_ratio = True
+    own = pipe.relight_linear(image, sky, dec["lighting"], None, "proposed")["relit"]
+    quotient = pipe.relight_linear(image, sky, dec["lighting"], None, "quotient")["relit"]
+    torch.testing.assert_close(own[fg], positive(quotient)[fg])
+    assert not torch.allclose(plain_self[fg], own[fg])  # the plain gain changes a self-relighting
+    target = dec["lighting"].flip(1).abs()
+    other = pipe.relight_linear(image, sky, target, None, "proposed")["relit"]
+    assert not torch.allclose(other, pipe.relight_linear(image, sky, target, None, "quotient")["relit"])

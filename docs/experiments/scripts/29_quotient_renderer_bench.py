@@ -34,6 +34,8 @@ def main() -> None:
     ap.add_argument("renderer")
     ap.add_argument("-o", "--out", required=True)
     ap.add_argument("--known", action="store_true", help="score the known track (proposed_known vs quotient_known)")
+    ap.add_argument("--gain-ratio", action="store_true",
+                    help="also score proposed_ratio: the renderer's gain for the target over its gain for the source")
     args = ap.parse_args()
     torch.set_num_threads(1)
     t0 = time.time()
@@ -55,8 +57,21 @@ def main() -> None:
                                          target_sun=p.sun_lighting(p.target),
                                          source_sun=p.sun_lighting(p.source))["relit"]
 
+    def ratio(fn):
+        def call(p):
+            r.renderer_gain_ratio = True
+            try:
+                return fn(p)
+            finally:
+                r.renderer_gain_ratio = False
+        return call
+
     if args.known:
         methods = {"proposed_known": proposed_known, "quotient_known": ms["quotient_known"]}
+        if args.gain_ratio:
+            methods["proposed_known_ratio"] = ratio(proposed_known)
+    elif args.gain_ratio:
+        methods = {"proposed": ms["proposed"], "quotient": ms["quotient"], "proposed_ratio": ratio(ms["proposed"])}
     else:
         methods = {"proposed": ms["proposed"], "quotient": ms["quotient"], "proposed_sun": proposed_sun}
     l1 = {}
@@ -72,10 +87,17 @@ def main() -> None:
     groups = np.asarray([p.view.scene for p in pairs])
     out = {"data": args.data, "renderer": args.renderer, "pairs": len(pairs),
            "l1": {k: float(v.mean()) for k, v in l1.items()}}
-    if args.known:
+    if args.gain_ratio and not args.known:
+        for other in ("proposed", "quotient"):
+            out[f"proposed_ratio_minus_{other}"] = paired_bootstrap(l1["proposed_ratio"], l1[other], groups=groups,
+                                                                   seed=0)._asdict()
+    elif args.known:
+        if args.gain_ratio:
+            out["proposed_known_ratio_minus_quotient_known"] = paired_bootstrap(
+                l1["proposed_known_ratio"], l1["quotient_known"], groups=groups, seed=0)._asdict()
         out["proposed_known_minus_quotient_known"] = paired_bootstrap(l1["proposed_known"], l1["quotient_known"],
                                                                       groups=groups, seed=0)._asdict()
-    else:
+    if not args.known and not args.gain_ratio:
         out["proposed_minus_quotient"] = paired_bootstrap(l1["proposed"], l1["quotient"], groups=groups,
                                                           seed=0)._asdict()
         out["proposed_sun_minus_quotient"] = paired_bootstrap(l1["proposed_sun"], l1["quotient"], groups=groups,
