@@ -312,6 +312,21 @@ def test_10_a_target_clipped_on_the_whole_foreground_is_left_out_and_counted(tin
     assert "1 left out" in rev.format_table(out)
 
 
+def _quotient_pipeline(tiny_dataset: Path, frozen: Path, tmp_path: Path):
+    """A tiny quotient-based renderer trained 3 steps and exported into a weights folder with the frozen
+    networks: ``(weights file, Relighter, image (1, 3, 24, W), sky, its decomposition)``."""
+    run = tmp_path / "run"
+    train_renderer(config(tiny_dataset, run, frozen, steps=3, ckpt_every=3, phase1_steps=3, base="quotient",
+                          additive=False))
+    dest = export_renderer(ckpt.latest_checkpoint(run), tmp_path / "w" / "renderer.safetensors")
+    for f in ("inverse.safetensors", "shadow.safetensors", "lighting_prior.npz"):
+        shutil.copy(frozen / f, tmp_path / "w" / f)
+    pipe = Relighter.load(tmp_path / "w")
+    batch = PairSampler(tiny_dataset, split="all", res=24).batch(1, 0)
+    image, sky = batch.image[:1], batch.sky[:1]
+    return dest, pipe, image, sky, pipe.decompose_linear(image, sky)
+
+
 def test_11_a_quotient_based_renderer_starts_at_the_quotient_method_and_round_trips(tiny_dataset: Path,
                                                                                    frozen: Path,
                                                                                    tmp_path: Path) -> None:
@@ -319,19 +334,10 @@ def test_11_a_quotient_based_renderer_starts_at_the_quotient_method_and_round_tr
     (through the Relighter, ``proposed`` equals ``quotient``), so relighting a photo to its own
     lighting gives the photo; the 17th-channel input is required and checked; a tiny run trains,
     exports with its base in the metadata, and loads back as a quotient-based renderer."""
-    run = tmp_path / "run"
-    train_renderer(config(tiny_dataset, run, frozen, steps=3, ckpt_every=3, phase1_steps=3, base="quotient",
-                          additive=False))
-    dest = export_renderer(ckpt.latest_checkpoint(run), tmp_path / "w" / "renderer.safetensors")
+    dest, pipe, image, sky, dec = _quotient_pipeline(tiny_dataset, frozen, tmp_path)
     assert ckpt.load_weights(dest)[1]["base"] == "quotient"
     net = load_renderer(dest)
     assert net.base == "quotient" and net.in_channels == 17
-    for f in ("inverse.safetensors", "shadow.safetensors", "lighting_prior.npz"):
-        shutil.copy(frozen / f, tmp_path / "w" / f)
-    pipe = Relighter.load(tmp_path / "w")
-    batch = PairSampler(tiny_dataset, split="all", res=24).batch(1, 0)
-    image, sky = batch.image[:1], batch.sky[:1]
-    dec = pipe.decompose_linear(image, sky)
     target = dec["lighting"].flip(1).abs()
     trained = pipe.relight_linear(image, sky, target, None, "proposed")["relit"]
     quotient = pipe.relight_linear(image, sky, target, None, "quotient")["relit"]
@@ -365,16 +371,7 @@ def test_12_the_gain_ratio_variant_gives_the_quotient_when_relit_to_the_source(t
     """``Relighter.renderer_gain_ratio`` (study 29, off by default): the renderer's gain for the target over
     its gain for the source, so relit to its own lighting the photo gets the quotient's ratio alone, whatever
     the renderer learned; to another lighting it differs from the quotient."""
-    run = tmp_path / "run"
-    train_renderer(config(tiny_dataset, run, frozen, steps=3, ckpt_every=3, phase1_steps=3, base="quotient",
-                          additive=False))
-    export_renderer(ckpt.latest_checkpoint(run), tmp_path / "w" / "renderer.safetensors")
-    for f in ("inverse.safetensors", "shadow.safetensors", "lighting_prior.npz"):
-        shutil.copy(frozen / f, tmp_path / "w" / f)
-    pipe = Relighter.load(tmp_path / "w")
-    batch = PairSampler(tiny_dataset, split="all", res=24).batch(1, 0)
-    image, sky = batch.image[:1], batch.sky[:1]
-    dec = pipe.decompose_linear(image, sky)
+    _, pipe, image, sky, dec = _quotient_pipeline(tiny_dataset, frozen, tmp_path)
     fg = (~sky).expand_as(image)
     plain_self = pipe.relight_linear(image, sky, dec["lighting"], None, "proposed")["relit"]
     pipe.renderer_gain_ratio = True
