@@ -60,7 +60,7 @@ def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
 def _read_sh(path: str) -> np.ndarray:
     p = Path(path)
     if not p.is_file():
-        raise ValueError(f"SH file {path!r} does not exist")
+        raise ValueError(f"SH file {path!r} {'is not a regular file' if p.exists() else 'does not exist'}")
     try:
         if p.suffix == ".npy":
             arr = np.load(p, allow_pickle=False)
@@ -82,7 +82,8 @@ def _target(env: str | None, sh_path: str | None, sun: list[float] | None, what:
     if env is not None:
         p = Path(env)
         if not p.is_file():
-            raise ValueError(f"{what} environment map {env!r} does not exist")
+            raise ValueError(f"{what} environment map {env!r} "
+                             f"{'is not a regular file' if p.exists() else 'does not exist'}")
         if p.suffix.lower() not in (".exr", ".hdr"):
             raise ValueError(f"{what} environment map {env!r} must be an .exr or .hdr file")
         import torch

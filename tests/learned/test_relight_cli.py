@@ -98,6 +98,8 @@ def test_03_sequence_writes_an_animated_gif_that_changes(photo: Path, tmp_path: 
     ("ok", ["--env", "nowhere.exr"], "environment map 'nowhere.exr' does not exist"),
     ("ok", ["--env", "PHOTO"], "must be an .exr or .hdr"),
     ("ok", ["--sh", "nowhere.npy"], "does not exist"),
+    ("ok", ["--sh", "TMPDIR"], "is not a regular file"),
+    ("ok", ["--env", "TMPDIR"], "is not a regular file"),
     ("ok", ["--sun", "120", "0"], "elevation"),
     ("ok", ["--sun", "20", "0", "--mask", "SMALLMASK"], "mask"),
     ("ok", ["--sun", "20", "0", "--sequence", "2"], r"\.gif"),
@@ -113,7 +115,8 @@ def test_04_bad_input_is_one_line_and_non_zero(photo: Path, tmp_path: Path, caps
         src.write_bytes(b"\x89PNG\r\n\x1a\n truncated")
     small = tmp_path / "small.png"
     io.write_png(small, np.ones((4, 4)))
-    args = [str(photo) if a == "PHOTO" else str(small) if a == "SMALLMASK" else a for a in args]
+    args = [str(photo) if a == "PHOTO" else str(small) if a == "SMALLMASK" else str(tmp_path) if a == "TMPDIR" else a
+            for a in args]
     rc = main(["relight", str(src), *args, "-o", str(tmp_path / "o.png")])
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1 and "Traceback" not in err
