@@ -434,39 +434,40 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
     Returns:
         ``(1, 1, H, W)`` bool.
     """
-    from physrelight.guided_filter import box_filter
-
     near = _dilate(sky, band) & _dilate(~sky, band)
     if not bool(near.any()):
         return sky
     x = torch.log(image.clamp_min(1e-4))
     sure_sky, sure_fg = (sky & ~near).to(x.dtype), (~sky & ~near).to(x.dtype)
-    r = 4 * band
-
-    def local_mean(w: torch.Tensor, v: torch.Tensor) -> tuple[torch.Tensor, bool]:
-        """Mean of ``v`` over the sure pixels ``w`` near each pixel; where none is near, over all of them."""
-        total = float(w.sum())
-        if total == 0:
-            return v, False
-        n = box_filter(w, r)
-        overall = (v * w).sum((2, 3), keepdim=True) / total
-        return torch.where(n > 0, box_filter(v * w, r) / n.clamp_min(1e-12), overall), True
-
-    def distance(w: torch.Tensor) -> torch.Tensor | None:
-        mu, ok = local_mean(w, x)
-        if not ok:
-            return None
-        if refine == "local":
-            return ((x - mu) ** 2).sum(1, keepdim=True)
-        # "gauss": a diagonal Gaussian per side, so a smooth sky does not claim a varied foreground's
-        # outliers (negative log-likelihood, up to a constant)
-        var = (local_mean(w, x * x)[0] - mu * mu).clamp_min(0) + VARIANCE_FLOOR
-        return ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
-
-    d_sky, d_fg = distance(sure_sky), distance(sure_fg)
-    if d_sky is None or d_fg is None:
+    if float(sure_sky.sum()) == 0 or float(sure_fg.sum()) == 0:
         return sky
+    r = 4 * band
+    if refine == "local":
+        d_sky = ((x - _local_mean(sure_sky, x, r)) ** 2).sum(1, keepdim=True)
+        d_fg = ((x - _local_mean(sure_fg, x, r)) ** 2).sum(1, keepdim=True)
+    else:
+        # "gauss": a diagonal Gaussian per side, so a smooth sky does not claim a varied foreground's outliers
+        d_sky, d_fg = _local_gaussian_nll(x, sure_sky, r), _local_gaussian_nll(x, sure_fg, r)
     return torch.where(near, d_sky < d_fg, sky)
+
+
+def _local_mean(w: torch.Tensor, v: torch.Tensor, r: int) -> torch.Tensor:
+    """``(1, C, H, W)`` mean of ``v (1, C, H, W)`` over the pixels of weight ``w (1, 1, H, W)`` (not all
+    zero) within ``r`` of each pixel; where none is that near, over all of them."""
+    from physrelight.guided_filter import box_filter
+
+    n = box_filter(w, r)
+    overall = (v * w).sum((2, 3), keepdim=True) / float(w.sum())
+    return torch.where(n > 0, box_filter(v * w, r) / n.clamp_min(1e-12), overall)
+
+
+def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int) -> torch.Tensor:
+    """``(1, 1, H, W)`` negative log-likelihood (times 2, up to a constant) of each pixel of ``x (1, C, H, W)``
+    under the diagonal Gaussian of the pixels ``w`` near it (:func:`_local_mean`; variance floor
+    :data:`VARIANCE_FLOOR`)."""
+    mu = _local_mean(w, x, r)
+    var = (_local_mean(w, x * x, r) - mu * mu).clamp_min(0) + VARIANCE_FLOOR
+    return ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
 
 
 GROW_REACH = 0.0
@@ -529,8 +530,6 @@ def grow_sky_by_colour(sky: torch.Tensor, image: torch.Tensor, reach: int, chi2:
     Returns:
         ``(1, 1, H, W)`` bool, a superset of ``sky``.
     """
-    from physrelight.guided_filter import box_filter
-
     if sky.ndim != 4 or sky.shape[:2] != (1, 1):
         raise ValueError(f"sky must have shape (1, 1, H, W), got {tuple(sky.shape)}")
     if image.ndim != 4 or image.shape[:2] != (1, 3) or image.shape[-2:] != sky.shape[-2:]:
@@ -574,13 +573,7 @@ def grow_sky_by_colour(sky: torch.Tensor, image: torch.Tensor, reach: int, chi2:
     pred = torch.einsum("khw,kc->chw", basis, coef) + med[:, None, None]
     maha = (((x - pred) / sigma[:, None, None]) ** 2).sum(0)
     d_sky = maha + 2 * torch.log(sigma).sum()
-    fg = (~sky)[0, 0].to(torch.float64)[None, None]
-    r = max(4, 4 * reach)
-    n = box_filter(fg, r)
-    if float(fg.sum()) == 0:
-        return sky
-    mu = box_filter(x[None] * fg, r) / n.clamp_min(1e-12)
-    var = (box_filter(x[None] ** 2 * fg, r) / n.clamp_min(1e-12) - mu * mu).clamp_min(0) + VARIANCE_FLOOR
-    d_fg = (((x[None] - mu) ** 2 / var + torch.log(var)).sum(1))[0]
-    grow = cand & (maha < chi2) & (d_sky < d_fg) & (n[0, 0] > 0)
+    # a candidate is itself non-sky, so the local Gaussian of the non-sky pixels is always defined there
+    d_fg = _local_gaussian_nll(x[None], (~sky).to(torch.float64), max(4, 4 * reach))[0, 0]
+    grow = cand & (maha < chi2) & (d_sky < d_fg)
     return sky | grow[None, None]
