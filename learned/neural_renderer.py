@@ -150,26 +150,26 @@ class NeuralRenderer(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """``(B, 14, H, W)`` (``(B, 17, H, W)`` for ``base="quotient"``) from :func:`renderer_inputs`
         -> ``(B, 3, H, W)`` linear RGB >= 0."""
-        _check(x, self.in_channels, "renderer input", None)
+        out = self._head(x)
         albedo, shading, shadow = x[:, 0:3], x[:, 6:9], x[:, 9:10]
         base = albedo * shading * shadow if self.base == "lambertian" else x[:, 14:17]
-        # Radiance spans decades: the network sees shading and residual on a compressed
-        # (signed log) scale; the raw values enter only through ``base`` and ``r``.
-        feats = [x[:, 0:6], _slog(x[:, 6:9]), x[:, 9:11], _slog(x[:, 11:14])]
-        if self.base == "quotient":
-            feats.append(_slog(x[:, 14:17]))
-        out = self.unet(torch.cat(feats, 1))
         gain = torch.exp(out[:, 0:3].clamp(-8.0, 8.0))
         return positive(base * gain + 0.1 * out[:, 3:6]) if self.additive else positive(base * gain)
 
     def gain(self, x: torch.Tensor) -> torch.Tensor:
         """``(B, 3, H, W)`` the learned gain ``exp(g)`` alone, for input ``x`` as in :meth:`forward`
         (a gain-only renderer's output is ``positive(base * gain(x))``)."""
+        return torch.exp(self._head(x)[:, 0:3].clamp(-8.0, 8.0))
+
+    def _head(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B, 6, H, W)`` the UNet's output (log-gain ``g``, additive ``r``) for input ``x``."""
         _check(x, self.in_channels, "renderer input", None)
+        # Radiance spans decades: the network sees shading and residual on a compressed
+        # (signed log) scale; the raw values enter only through ``base`` and ``r``.
         feats = [x[:, 0:6], _slog(x[:, 6:9]), x[:, 9:11], _slog(x[:, 11:14])]
         if self.base == "quotient":
             feats.append(_slog(x[:, 14:17]))
-        return torch.exp(self.unet(torch.cat(feats, 1))[:, 0:3].clamp(-8.0, 8.0))
+        return self.unet(torch.cat(feats, 1))
 
 
 def _slog(x: torch.Tensor) -> torch.Tensor:
@@ -202,9 +202,9 @@ def render_relit(renderer: NeuralRenderer, image: torch.Tensor, sky: torch.Tenso
     Returns:
         ``(B, 3, H, W)`` linear relit photo; sky pixels are the input's, bit for bit.
     """
-    base = getattr(renderer, "base", "lambertian")
-    if (base == "quotient") != (quotient is not None):
-        raise ValueError(f"a {base!r} renderer {'needs' if base == 'quotient' else 'takes no'} quotient image")
+    if (renderer.base == "quotient") != (quotient is not None):
+        raise ValueError(f"a {renderer.base!r} renderer {'needs' if renderer.base == 'quotient' else 'takes no'} "
+                         "quotient image")
     for key in ("albedo", "normals", "shadow", "lighting"):
         if key not in decomposition:
             raise ValueError(f"decomposition lacks {key!r} (have {sorted(decomposition)})")

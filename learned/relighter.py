@@ -179,6 +179,11 @@ class Relighter:
         # (l1 +0.0053 against the plain gain, +0.0011 against quotient; study 29).
         self.renderer_gain_ratio = False
 
+    @property
+    def renderer_base(self) -> str | None:
+        """What the loaded renderer's gain multiplies (:data:`learned.neural_renderer.BASES`), None without one."""
+        return None if self.renderer is None else self.renderer.base
+
     @classmethod
     def load(cls, path: str | os.PathLike | None = None, renderer: str | os.PathLike | None = None,
              lighting_estimator: str = "source_map", source_config: SourceLightingConfig | None = None,
@@ -372,8 +377,8 @@ class Relighter:
         source = None if source_lighting is None else batch_sh(source_lighting, "source_lighting")
         if known_source and source is None:
             raise ValueError("known_source needs source_lighting: the photo's own lighting")
-        if known_source and not (method.startswith("quotient") or (
-                method == "proposed" and getattr(self.renderer, "base", "lambertian") == "quotient")):
+        quotient_based = method == "proposed" and self.renderer_base == "quotient"
+        if known_source and not (method.startswith("quotient") or quotient_based):
             raise ValueError(f"known_source is a track of the quotient methods and of a quotient-based renderer, "
                              f"not of {method!r}")
         scale = exposure_scale(tgt, out["lighting"], source, fallback=self.prior.mean.reshape(1, 9, 3))[:, None, None]
@@ -382,7 +387,6 @@ class Relighter:
             s = torch.ones_like(out["shadow"])
         else:
             s = repair_top_rows(self.shadow_net(out["normals"], tgt))
-        quotient_based = method == "proposed" and getattr(self.renderer, "base", "lambertian") == "quotient"
         if method in ("quotient", "quotient_shadownet") or quotient_based:
             src = source * scale if known_source else out["lighting"]
             src_shadow = out["shadow"] if method == "quotient_shadownet" else None
@@ -407,18 +411,13 @@ class Relighter:
             g_t = self.renderer.gain(renderer_inputs(*args, tgt, s, relit))
             g_s = self.renderer.gain(renderer_inputs(*args, src, s_src, q_src))
             relit = torch.where(sky, img, positive(relit * g_t / g_s))
-        elif quotient_based:
-            from .neural_renderer import render_relit
-
-            # the renderer on top of the physical core: a learned gain on the quotient image
-            relit = render_relit(self.renderer, image.float(), sky.bool(), out, tgt, s, quotient=relit)
-        elif method in ("quotient", "quotient_shadownet"):
-            pass
         elif method == "proposed" and self.renderer is not None:
             from .neural_renderer import render_relit
 
-            relit = render_relit(self.renderer, image.float(), sky.bool(), out, tgt, s)
-        else:
+            # a quotient-based renderer is a learned gain on the quotient image just computed
+            relit = render_relit(self.renderer, image.float(), sky.bool(), out, tgt, s,
+                                 quotient=relit if quotient_based else None)
+        elif method not in ("quotient", "quotient_shadownet"):
             relit = image_model.render(out["albedo"], out["normals"], tgt, s)
         relit = torch.where(sky, image.float(), relit.clamp_min(0))
         return {"relit": relit, "target": tgt, "target_shadow": s, **{k: out[k] for k in (

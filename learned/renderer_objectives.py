@@ -167,11 +167,9 @@ def renderer_losses(renderer: NeuralRenderer, discriminator: MultiscaleDiscrimin
     a, n, s, L = (decomposition[k] for k in ("albedo", "normals", "shadow", "lighting"))
     terms: dict[str, torch.Tensor] = {}
 
-    quotient_based = getattr(renderer, "base", "lambertian") == "quotient"
-
     def quotient(target_lighting: torch.Tensor) -> torch.Tensor | None:
         """The quotient image the Relighter hands a quotient-based renderer (None for the Lambertian one)."""
-        if not quotient_based:
+        if renderer.base != "quotient":
             return None
         return quotient_relight(image, n, L, target_lighting, mask=~sky, smooth_radius=SMOOTH_RADIUS)
 

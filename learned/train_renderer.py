@@ -220,7 +220,7 @@ def validate(renderer: NeuralRenderer, inverse: nn.Module, shadow_net: nn.Module
     pipe = Relighter(inverse, shadow_net, prior, config.res, renderer)
     root = config.val_data or config.data
     methods = ("proposed", "lambertian_sh", "shadownet_lambertian")
-    if getattr(renderer, "base", "lambertian") == "quotient":
+    if renderer.base == "quotient":
         methods += ("quotient",)
     result = evaluate_relight(pipe.relight_linear, root, config.val_split, config.res, config.val_images, methods)
     flat = {f"{m}_{k}": v for m in methods for k, v in result[m].items()}

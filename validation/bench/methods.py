@@ -246,7 +246,7 @@ class AnalysisBySynthesis:
 
 def _quotient_based(relighter: Any, method: str) -> bool:
     """``proposed`` with a renderer on top of the quotient image (``NeuralRenderer(base="quotient")``)."""
-    return method == "proposed" and getattr(getattr(relighter, "renderer", None), "base", "lambertian") == "quotient"
+    return method == "proposed" and relighter.renderer_base == "quotient"
 
 
 def build_methods(relighter: Any) -> dict[str, Callable[[Pair], torch.Tensor]]:

@@ -286,7 +286,7 @@ def _run(level: BenchLevel, data: str | Path | None, out_dir: str | Path, comman
         "data": {**data_info, "views": len(views), "pairs": describe_pairs(pairs),
                  "saturated_pairs": len(saturated), "saturated_pair_keys": saturated},
         "renderer_weights": relighter.renderer is not None, "phase_seconds": phases,
-        "renderer_base": getattr(relighter.renderer, "base", None),
+        "renderer_base": relighter.renderer_base,
         "weights": "learned/weights" if weights is None else str(weights),
     }
     report["seconds"] = round(time.perf_counter() - t_start, 1)
