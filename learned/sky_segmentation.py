@@ -344,14 +344,16 @@ def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor
     return kept, ""
 
 
-def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int | None = SEGMENT_RES,
+def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor,
+                             res: int | tuple[int, ...] | None = SEGMENT_RES,
                              eps: float = 1e-2, threshold: float = 0.5,
                              band: int = BAND_WORKING_PIXELS,
                              refine: str = REFINEMENT,
                              grow: float | None = None) -> tuple[torch.Tensor, list[str]]:
     """The sky of real photos at full resolution, and a reason per photo when there is none.
 
-    The segmenter runs with its short side at ``res`` (:data:`SEGMENT_RES`); its mask keeps only a
+    The segmenter runs with its short side at ``res`` (:data:`SEGMENT_RES`; several sizes: the mean of
+    its probabilities at each, brought bilinearly to the largest); its mask keeps only a
     plausible sky (:func:`plausible_sky`, at that resolution); the kept sky's probability is
     brought to full size by the guided filter on the photo's log luminance
     (:func:`physrelight.guided_filter.guided_upsample`), so the boundary follows the photo's
@@ -361,7 +363,8 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
 
     Args:
         image: ``(B, 3, H, W)`` linear photos.
-        res: the working short side; None: the photo's own (no resizing).
+        res: the working short side, or a tuple of them (a multi-scale mean; the largest is the
+            working size); None: the photo's own (no resizing).
         eps: the guided filter's regulariser (log-luminance units squared).
         threshold: the sky probability above which a working pixel is sky, in (0, 1).
         band: working pixels near the boundary decided by colour (:func:`refine_sky_boundary`);
@@ -377,8 +380,10 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
     from physrelight.guided_filter import guided_upsample
 
     _check_image(image)
-    if res is not None and (isinstance(res, bool) or not isinstance(res, int) or res < 8):
-        raise ValueError(f"res must be an integer >= 8 or None, got {res!r}")
+    sizes = (res,) if res is None or not isinstance(res, tuple) else res
+    if not sizes or any(r is not None and (isinstance(r, bool) or not isinstance(r, int) or r < 8) for r in sizes) \
+            or (len(sizes) > 1 and None in sizes):
+        raise ValueError(f"res must be an integer >= 8, a non-empty tuple of them, or None, got {res!r}")
     if not (isinstance(threshold, (int, float)) and 0.0 < float(threshold) < 1.0):
         raise ValueError(f"threshold must be a number in (0, 1), got {threshold!r}")
     if isinstance(band, bool) or not isinstance(band, int) or band < 0:
@@ -390,9 +395,13 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor, res: int 
         raise ValueError(f"grow must be a number in [0, 1], got {grow!r}")
     reach = int(round(float(grow) * min(image.shape[-2:])))
     param = next(model.parameters())
-    small = image.to(param.dtype) if res is None else resize_short_side(image.to(param.dtype), res)
+    smalls = [image.to(param.dtype) if r is None else resize_short_side(image.to(param.dtype), r) for r in sizes]
+    small = max(smalls, key=lambda x: x.shape[-2] * x.shape[-1])
     with torch.no_grad():
-        prob = torch.sigmoid(model(small))
+        # Several sizes: the coarse run sees the scene whole, the fine one keeps thin structures.
+        prob = torch.stack([F.interpolate(torch.sigmoid(model(x)), size=small.shape[-2:], mode="bilinear",
+                                          align_corners=False) if x.shape[-2:] != small.shape[-2:]
+                            else torch.sigmoid(model(x)) for x in smalls]).mean(0)
     masks, reasons = [], []
     for b in range(image.shape[0]):
         kept, why = plausible_sky(prob[b, 0] > threshold, small[b])

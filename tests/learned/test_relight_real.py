@@ -164,6 +164,24 @@ def test_07b_the_relighters_sky_grow_reaches_the_mask(relighter) -> None:
     assert float(grown[right].float().mean()) > float(base[right].float().mean()) + 0.05
 
 
+def test_07c_a_multi_scale_mask_is_the_mean_of_its_sizes_probabilities(relighter) -> None:
+    """``res=(a, b, ...)`` averages the segmenter's probabilities (study 30): one size twice is that size,
+    a tuple of one is its integer, and a bad size is refused by name."""
+    from learned.sky_segmentation import sky_mask_full_resolution
+
+    lin = colour.from_ldr(torch.from_numpy(_outdoor(90, 120)).permute(2, 0, 1)[None].float() / 255)
+    one, _ = sky_mask_full_resolution(relighter.sky_segmenter, lin, res=64)
+    assert one.any()
+    for res in ((64,), (64, 64)):
+        same, _ = sky_mask_full_resolution(relighter.sky_segmenter, lin, res=res)
+        assert torch.equal(same, one)
+    both, _ = sky_mask_full_resolution(relighter.sky_segmenter, lin, res=(64, 128))
+    assert both.shape == one.shape
+    for bad in ((), (64, None), (64, 4), 4.0):
+        with pytest.raises(ValueError, match="res must be"):
+            sky_mask_full_resolution(relighter.sky_segmenter, lin, res=bad)
+
+
 def _jpeg_with_exif(path: Path, img: np.ndarray, orientation: int, f35: int | None = None) -> None:
     from PIL import Image
 
