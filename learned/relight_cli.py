@@ -29,7 +29,8 @@ The sky (white = sky in ``--mask``) is found by the shipped segmenter, kept only
 plausible sky; when there is none a one-line warning says why and only the foreground is
 relit. It is replaced by ``--sky-source``: ``target`` renders the target's own sky (an env map
 seen through the camera, or the sun's clear or overcast sky) in the foreground's exposure,
-``gan`` paints one with SkyGAN, ``keep`` keeps the photo's. ``--exposure auto`` (default)
+``fit`` renders the outdoor sky model fitted to the target's SH (any target), ``gan`` paints one
+with SkyGAN, ``keep`` keeps the photo's. ``--exposure auto`` (default)
 meters the relit photo as a camera would (the foreground to the photo's key, middle grey for
 a dark photo, never clipping the sky); ``keep`` keeps the camera's settings; a number adds
 stops to ``keep``. ``--sequence N`` sweeps the azimuth over 360 degrees in N frames (GIF).
@@ -240,8 +241,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pitch", type=number_in(-89.0, 89.0, "a pitch in degrees"), default=None, metavar="DEG",
                    help="camera pitch in degrees, up positive (default: estimated from the sky's horizon)")
     p.add_argument("--sky-source", choices=SKY_SOURCES, default=None,
-                   help="the relit sky: target (render the target's sky; default for --env/--sun), gan "
-                        "(SkyGAN; default for --sh), keep (the photo's)")
+                   help="the relit sky: target (render the target's sky; default for --env/--sun), fit (a sky "
+                        "model fitted to the target's SH), gan (SkyGAN; default for --sh), keep (the photo's)")
     p.add_argument("--exposure", type=_exposure, default="auto",
                    help="auto (meter like a camera; default), keep (same camera settings) or stops (e.g. -1)")
     p.add_argument("--azimuth", type=float, default=0.0, help="turn the target about the vertical (degrees)")

@@ -31,6 +31,7 @@ import torch
 from physrelight import colour, image_model, sh
 from physrelight.lighting_prior import LightingPrior
 from physrelight.quotient import SMOOTH_RADIUS, quotient_relight
+from physrelight.sky_model import horizon_clamped, sun_disc
 
 from . import checkpoint as ckpt
 from .lighting import WEIGHTS_DIR, load_prior
@@ -43,19 +44,18 @@ DEFAULT_METHOD = "proposed"
 image, which beat ``quotient`` on both held-out sets (docs/experiments/29-renderer-on-the-quotient.md)."""
 
 __all__ = ["DEFAULT_FOV_DEG", "LIGHTING_ESTIMATORS", "RELIGHT_METHODS", "SKY_SOURCES", "SKY_TYPES", "WEIGHT_FILES", "Relighter", "dc_luminance",
-           "envmap_sun", "estimate_pitch", "exposure_scale", "fill_weights_folder", "match_exposure", "rotate_azimuth", "sky_map_kind",
+           "envmap_sun", "estimate_pitch", "exposure_scale", "fitted_sky", "fill_weights_folder", "match_exposure", "rotate_azimuth", "sky_map_kind",
            "sun_lighting", "sun_sky_map", "target_sky", "transfer_to_full_resolution", "working_resolution"]
 
 
-SUN_RADIUS_DEG = 0.27
-"""The sun's angular radius, for drawing its disc in a rendered sky."""
 DEFAULT_FOV_DEG = 60.0
 """A photo's horizontal field of view when nothing says otherwise (no EXIF focal length, no ``--fov``)."""
-SKY_SOURCES = ("target", "gan", "keep")
+SKY_SOURCES = ("target", "fit", "gan", "keep")
+"""Where a relit photo's sky comes from: ``"target"``, the target's own sky through the photo's camera (an
+env map or a sun target); ``"fit"``, the outdoor sky model fitted to the target's order-2 SH
+(:func:`physrelight.sky_model.fit_sky`; any target); ``"gan"``, SkyGAN; ``"keep"``, the photo's own."""
 LIGHTING_ESTIMATORS = ("network", "source_map")
 """The source-lighting steps of :meth:`Relighter.decompose_linear`."""
-HORIZON_Y = 0.02
-"""A sun target's sky is looked up no lower than this (the sine of about 1 degree of elevation)."""
 
 
 def _as_image(image: Any) -> tuple[torch.Tensor, str]:
@@ -452,8 +452,8 @@ class Relighter:
         return {"relit": relit, "working": out, "working_sky": small_sky}
 
     def paint_sky(self, relit: torch.Tensor, sky: torch.Tensor, working: dict[str, torch.Tensor],
-                  working_sky: torch.Tensor, seed: int = 0) -> torch.Tensor:
-        """SkyGAN's sky for the target, composited into a full-resolution relighting.
+                  working_sky: torch.Tensor, seed: int = 0, smooth: float | None = None) -> torch.Tensor:
+        """SkyGAN's sky for the target, smoothed within the mask, composited into a full-resolution relighting.
 
         Args:
             relit: ``(B, 3, H, W)`` linear relit photo (:meth:`relight_full_resolution`'s ``"relit"``).
@@ -461,6 +461,9 @@ class Relighter:
             working, working_sky: that call's ``"working"`` dict (relit foreground and target at
                 the working resolution) and ``"working_sky"``.
             seed: SkyGAN's noise (same seed, same sky).
+            smooth: the Gaussian SkyGAN's sky is blurred by within the mask, a fraction of the short
+                side (:func:`learned.sky_gan.smooth_sky`); None: :data:`learned.sky_gan.SMOOTH_SIGMA`;
+                0: SkyGAN's own sky, blotches and all.
 
         Returns:
             ``(B, 3, H, W)``: ``relit`` with the generated sky on ``sky``; ``relit`` itself when no
@@ -470,10 +473,16 @@ class Relighter:
             return relit
         # SkyGAN at the working resolution (its training scale), conditioned on the relit
         # foreground and the target; the sky is smooth, so upsampling it loses nothing.
-        from .sky_gan import generate_sky
+        from .sky_gan import SMOOTH_SIGMA, generate_sky, smooth_sky
 
+        smooth = SMOOTH_SIGMA if smooth is None else smooth
+        if not (isinstance(smooth, (int, float)) and smooth >= 0):
+            raise ValueError(f"smooth must be a fraction of the short side >= 0, got {smooth!r}")
         painted = generate_sky(self.sky_generator, working["relit"], working_sky, working["target"], seed=seed)
         painted = torch.nn.functional.interpolate(painted, size=relit.shape[-2:], mode="bilinear", align_corners=False)
+        if smooth > 0:
+            # SkyGAN's blotches are detail it cannot place: blurred away, its sky scores higher (study 31)
+            painted = smooth_sky(painted, sky, float(smooth))
         return torch.where(sky, painted, relit)
 
     def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
@@ -538,7 +547,8 @@ class Relighter:
         ``UserWarning`` says why and only the foreground is relit. The sky is then replaced from
         ``sky_source`` (:data:`SKY_SOURCES`; None: ``"target"`` for an env-map or sun target, else
         ``"gan"`` when SkyGAN is shipped, else ``"keep"``): ``"target"`` looks the target itself up
-        through the photo's camera (:func:`target_sky`), in the relit foreground's units.
+        through the photo's camera (:func:`target_sky`), in the relit foreground's units; ``"fit"``
+        the sky model fitted to the target's SH (:func:`physrelight.sky_model.fit_sky`), likewise.
 
         Args:
             image: the photo (see the module doc); a single image.
@@ -553,7 +563,7 @@ class Relighter:
             azimuth_deg: turn the target about the world's vertical axis first (degrees,
                 counter-clockwise seen from above).
             sky: sky type of a sun-direction target (:func:`sun_lighting`).
-            sky_source: ``"target"``, ``"gan"``, ``"keep"`` or None (see above).
+            sky_source: ``"target"``, ``"fit"``, ``"gan"``, ``"keep"`` or None (see above).
             exposure: ``"keep"`` (default here), ``"auto"`` or stops (:func:`physrelight.exposure.exposure_gain`).
             fov_deg: the photo's horizontal field of view (its focal length, e.g. from EXIF).
             pitch_deg: the level camera's pitch; None: estimated from the sky's horizon
@@ -653,11 +663,14 @@ class Relighter:
 
         sky_from = sky_source or ("target" if sky_map_kind(target) != "sh" else "gan" if self.sky_generator else "keep")
         if new_sky and bool(sky.any()):
-            if sky_from == "target":
-                # The target's own sky, in the relit foreground's units: the target was scaled by
-                # dc(out target) / dc(target) into the decomposition's (= the photo's linear) units.
-                k = float(dc_luminance(out["target"])[0] / dc_luminance(target_cam[None])[0])
-                radiance = target_sky(target, K, T, h, w, sky_type, azimuth_deg) * k
+            # A rendered sky comes in the relit foreground's units: the target was scaled by
+            # dc(out target) / dc(target) into the decomposition's (= the photo's linear) units.
+            k = float(dc_luminance(out["target"])[0] / dc_luminance(target_cam[None])[0])
+            if sky_from in ("target", "fit"):
+                if sky_from == "target":
+                    radiance = target_sky(target, K, T, h, w, sky_type, azimuth_deg) * k
+                else:
+                    radiance = fitted_sky(self.target_lighting(turned, None, sky_type), K, T, h, w) * k
                 relit = torch.where(sky, radiance.permute(2, 0, 1)[None].to(relit.dtype), relit)
             elif sky_from == "gan":
                 relit = self.paint_sky(relit, sky, out, small_sky, seed=seed)
@@ -742,17 +755,14 @@ def sun_sky_map(sky: str = "clear", direction: Any = (0.0, 1.0, 0.0), height: in
         raise ValueError(f"sky must be one of {SKY_TYPES}, got {sky!r}")
     from physrelight import envmap
 
+    from physrelight.sky_model import clear_sky, overcast_sky, sun_glow
+
     up = np.array([[0.0, 1.0, 0.0]])
     d = envmap.directions(height, 2 * height)
-    cos_z = d[..., 1]
     if sky == "overcast":
-        lum = np.where(cos_z > 0, (1.0 + 2.0 * np.clip(cos_z, 0, 1)) / 3.0, 0.0)
-        env = np.repeat(lum[..., None], 3, axis=-1)
+        env = np.repeat(overcast_sky(d)[..., None], 3, axis=-1)
         return env / float(sh.irradiance(sh.project_envmap(env, order=2), up)[0, 1])
-    t = (1.0 - np.clip(cos_z, 0, 1))[..., None] ** 2  # 0 at the zenith, 1 at the horizon
-    colour_ = (1 - t) * np.array([0.30, 0.50, 1.0]) + t * np.array([0.80, 0.88, 1.0])
-    glow = 2.0 * np.maximum(0.0, d @ _sun_direction(direction))[..., None] ** 32
-    env = np.where(cos_z[..., None] > 0, colour_ * (1.0 + t) + glow, 0.0)
+    env = clear_sky(d) + sun_glow(d, _sun_direction(direction))[..., None]
     # Scale so the order-2 irradiance the image model sees on a horizontal surface is 0.3 in green.
     return env * (0.3 / float(sh.irradiance(sh.project_envmap(env, order=2), up)[0, 1]))
 
@@ -822,7 +832,7 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     An env map is looked up through the pinhole camera (``K``, ``world_to_camera``) by
     :func:`physrelight.panorama.view` (one ray per pixel: a photo's pixel is finer than a map's
     texel); a sun target is :func:`sun_sky_map` plus the sun's disc (radius
-    :data:`SUN_RADIUS_DEG`, irradiance 1). ``azimuth_deg`` turns the target about +Y as
+    :data:`physrelight.sky_model.SUN_RADIUS_DEG`, irradiance 1). ``azimuth_deg`` turns the target about +Y as
     :func:`rotate_azimuth` does (the camera is turned the other way).
 
     Raises:
@@ -839,20 +849,24 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
         env = envmap.read(target) if isinstance(target, (str, os.PathLike)) else np.asarray(target)
         return torch.as_tensor(panorama.view(torch.as_tensor(env, dtype=torch.float32), K, R, height, width, 1))
     env = torch.as_tensor(sun_sky_map(sky, target), dtype=torch.float32)
-    rays = panorama.camera_rays(K, R, height, width, 1)
-    # This sky has no ground: a "sky" pixel below the horizon (a mask or a pitch a little off) shows
-    # the sky just above the horizon rather than black.
-    low = rays[..., 1] < HORIZON_Y
-    rays = torch.where(low[..., None], torch.nn.functional.normalize(
-        torch.cat([rays[..., :1], torch.full_like(rays[..., 1:2], HORIZON_Y), rays[..., 2:]], -1), dim=-1), rays)
+    rays = horizon_clamped(panorama.camera_rays(K, R, height, width, 1))
     out = panorama.look_up(env, rays)
     if sky == "clear":
-        d = torch.as_tensor(_sun_direction(target), dtype=torch.float64)
-        rays = rays[..., 0, :]
-        r = math.radians(SUN_RADIUS_DEG)
-        disc = (rays @ d > math.cos(r)).to(out.dtype)
-        out = out + disc[..., None] / (math.pi * r * r)
+        out = out + sun_disc(rays[..., 0, :], _sun_direction(target)).to(out.dtype)[..., None]
     return out
+
+
+def fitted_sky(coeffs: Any, K: Any, world_to_camera: Any, height: int, width: int,
+               glow_exponent: float | None = None) -> torch.Tensor:
+    """``(height, width, 3)`` the sky implied by world-frame order-2 SH ``coeffs (9, 3)`` as the photo's
+    camera (``K``, ``world_to_camera``) sees it, in the coefficients' units: the outdoor sky model
+    fitted to them (:func:`physrelight.sky_model.fit_sky`), one ray per pixel
+    (:func:`physrelight.sky_model.sky_view`). Smooth by construction."""
+    from physrelight import panorama
+    from physrelight.sky_model import FIT_GLOW_EXPONENT, fit_sky, sky_view
+
+    fit = fit_sky(coeffs, FIT_GLOW_EXPONENT if glow_exponent is None else glow_exponent)
+    return sky_view(fit, panorama.camera_rays(K, world_to_camera, height, width, 1)).float()
 
 
 def estimate_pitch(sky: torch.Tensor, K: Any, limits: tuple[float, float] = (-30.0, 45.0)) -> float:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from physrelight import colour, io, panorama
+from physrelight import colour, envmap, io, panorama, sh
 
 ROOT = Path(__file__).resolve().parents[2]
 FOREST = ROOT / "physrelight" / "data" / "hdri" / "forest.exr"
@@ -373,3 +373,46 @@ def test_04d_the_growth_neither_extrapolates_the_sky_nor_trusts_a_mixed_mask() -
             grow_sky_by_colour(coarse, img2, **kw)
     with pytest.raises(ValueError, match="image"):
         grow_sky_by_colour(coarse, img2[..., :10, :], reach=4)
+
+
+def test_10_an_sh_targets_fitted_sky_is_the_sky_its_sh_came_from(relighter) -> None:
+    """``sky_source="fit"`` on the SH of a CIE overcast sky paints what ``"target"`` paints from that sky's
+    map (the fit finds it exactly; study 31), in the same units and exposure."""
+    from physrelight.sky_model import overcast_sky
+
+    env = np.repeat(0.8 * overcast_sky(envmap.directions(128, 256))[..., None], 3, -1)
+    coeffs = np.asarray(sh.project_envmap(env, order=2))
+    photo = _outdoor(60, 80)
+    mask = np.zeros((60, 80), dtype=bool)
+    mask[:20] = True
+    kw = dict(sky_mask=mask, method="quotient", exposure="keep", pitch_deg=20.0)
+    by_map = relighter.relight(photo, env, sky_source="target", **kw)
+    by_fit = relighter.relight(photo, coeffs, sky_source="fit", **kw)
+    assert np.abs(by_fit[:20].astype(float) - by_map[:20].astype(float)).max() <= 2 / 255 + 1e-9
+    assert np.array_equal(by_fit[20:], by_map[20:])
+
+
+def test_10b_an_sh_targets_default_sky_is_skygan_smoothed(relighter) -> None:
+    """Without ``sky_source`` an SH target gets SkyGAN's sky blurred within the mask (study 31): smoother
+    than SkyGAN's own, and ``paint_sky(smooth=0)`` is that own sky."""
+    skimage = pytest.importorskip("skimage")
+    from learned.relighter import Relighter
+
+    coeffs = np.asarray(sh.project_envmap(envmap.read(FOREST), order=2))
+    photo = skimage.data.rocket()[::2, ::2]
+    sky, _ = Relighter.photo_sky(relighter, colour.from_ldr(torch.from_numpy(photo).permute(2, 0, 1)[None].float() / 255))
+    m = sky[0, 0].numpy()
+    default = relighter.relight(photo, coeffs, sky_mask=m, method="quotient").astype(float)
+    raw_gan = relighter.relight(photo, coeffs, sky_mask=m, method="quotient", sky_source="gan").astype(float)
+    assert np.array_equal(default, raw_gan)  # "gan" is the smoothed sky too
+
+    def roughness(img: np.ndarray) -> float:
+        inner = m & np.roll(m, 1, 0) & np.roll(m, 1, 1)
+        return float(np.abs(np.diff(img, axis=0))[inner[1:]].mean() + np.abs(np.diff(img, axis=1))[inner[:, 1:]].mean())
+
+    lin = colour.from_ldr(torch.from_numpy(photo).permute(2, 0, 1)[None].float() / 255)
+    full = relighter.relight_full_resolution(lin, sky, relighter.target_lighting(coeffs)[None].float(), method="quotient")
+    own = relighter.paint_sky(full["relit"], sky, full["working"], full["working_sky"], smooth=0)
+    smoothed = relighter.paint_sky(full["relit"], sky, full["working"], full["working_sky"])
+    to8 = lambda x: (colour.to_ldr(x.clamp_min(0))[0].permute(1, 2, 0).numpy() * 255)  # noqa: E731
+    assert roughness(to8(smoothed)) < 0.5 * roughness(to8(own))

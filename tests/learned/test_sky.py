@@ -240,3 +240,29 @@ def test_export_and_load_round_trip(tiny_dataset, tmp_path):
         load_sky_segmenter(g_path)
     with pytest.raises(ValueError, match="not a sky_gan"):
         load_sky_generator(s_path)
+
+
+@pytest.mark.parametrize("size", [(40, 60), (300, 420)])
+def test_smooth_sky_keeps_a_constant_sky_and_lets_no_foreground_in(size):
+    """Normalised convolution: a constant sky stays that constant on the mask, whatever the foreground
+    holds (at full size and on the downsized path above 256 px), and a blotchy sky loses its blotches."""
+    from learned.sky_gan import smooth_sky
+
+    h, w = size
+    mask = torch.zeros(1, 1, h, w, dtype=torch.bool)
+    mask[..., : h // 2, :] = True
+    img = torch.full((1, 3, h, w), 100.0)  # a bright foreground must not leak in
+    img[:, :, : h // 2] = torch.tensor([0.2, 0.3, 0.6])[:, None, None]
+    out = smooth_sky(img, mask)
+    sky = out[:, :, : h // 2 - 1]
+    assert torch.allclose(sky, torch.tensor([0.2, 0.3, 0.6])[None, :, None, None].expand_as(sky), rtol=1e-5)
+    g = torch.Generator().manual_seed(0)
+    blotchy = img.clone()
+    blotchy[:, :, : h // 2] *= torch.exp(0.5 * torch.randn(1, 1, h // 2, w, generator=g))
+    sm = smooth_sky(blotchy, mask)[:, :, : h // 2]
+    spread = lambda x: float(x.std(dim=(2, 3)).mean())  # noqa: E731 (per channel, over the pixels)
+    assert spread(sm) < 0.2 * spread(blotchy[:, :, : h // 2])
+    with pytest.raises(ValueError, match="sky must have shape"):
+        smooth_sky(img, mask[..., :-1])
+    with pytest.raises(ValueError, match="sigma"):
+        smooth_sky(img, mask, sigma=0.0)

@@ -42,7 +42,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-from learned.relighter import estimate_pitch, target_sky
+from learned.relighter import estimate_pitch, fitted_sky, target_sky
 from physrelight import colour, envmap, metrics, panorama, sh
 
 from .methods import to_chw
@@ -189,6 +189,9 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
             estimated = panorama.level_camera(crop.yaw_deg, pitch)
             rendered = target_sky(tgt.env, crop.K, estimated, h, w) * k
             skies = {"target": torch.where(seg, rendered.permute(2, 0, 1)[None].float(), relit),
+                     # the sky model fitted to the target's world-frame SH, through relight's estimated camera
+                     "fit": torch.where(seg, (fitted_sky(tgt.sh(2) * k, crop.K, estimated, h, w))
+                                        .permute(2, 0, 1)[None].float(), relit),
                      "skygan": relighter.paint_sky(relit, seg, res["working"], res["working_sky"], seed=seed),
                      "sh_radiance": torch.where(seg, sh_radiance_image(L_t * k, dirs), relit),
                      "keep": relit,

@@ -176,7 +176,9 @@ def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
               "output's exposure, over the true sky pixels (sRGB). Sky sources, all composited on the segmenter's "
               "mask over the `quotient` foreground: `target` (what `relight` renders: the target through the "
               "camera it estimates, the crop's field of view as EXIF would give it and the pitch from the sky's "
-              "horizon), `skygan` (SkyGAN's sky), `sh_radiance` (the target's order-2 SH radiance), `keep` (the "
+              "horizon), `fit` (the outdoor sky model fitted to the target's order-2 SH, `physrelight.sky_model`, "
+              "through the same estimated camera: what `relight --sh --sky-source fit` paints), `skygan` (SkyGAN's "
+              "sky), `sh_radiance` (the target's order-2 SH radiance), `keep` (the "
               "photo's own sky: identity's and the synthetic methods'), `exact_view` (the target through the true "
               "camera: the ceiling, limited only by the mask).", "", "l1:", ""]
     lines += _table(groups, s, SKY_SOURCES, lambda g, r: g["sky"][r]["l1"], "sky source")

@@ -1,0 +1,257 @@
+"""Analytic sky radiance, and the sky an order-2 SH lighting implies.
+
+A lighting given only as SH coefficients ``(9, 3)`` does not say what its sky looks like, yet
+``relight --sh`` has to paint one. :func:`fit_sky` explains the coefficients by a small physical
+model, the fewest parts an outdoor sky needs:
+
+* a delta sun (:func:`physrelight.sh.project_sun`) towards ``s``, elevation >= 0;
+* the sun's glow, ``2 max(0, d . s)^2`` above the horizon (forward scattering by haze round the sun;
+  the exponent :data:`FIT_GLOW_EXPONENT` was chosen among 2-32 on the training panoramas, study 31);
+* a clear sky, deep blue (0.30, 0.50, 1.0) at the zenith turning pale (0.80, 0.88, 1.0) and twice as
+  bright towards the horizon (:func:`clear_sky`);
+* the CIE overcast sky, ``(1 + 2 cos theta) / 3`` (:func:`overcast_sky`);
+* a uniform ground below the horizon (lit by the sky and the sun, seen by upward-facing SH only).
+
+Each part has a non-negative weight per channel (its colour), solved by exact non-negative least
+squares on the nine coefficients; the sun's direction is searched on a 2-degree grid of the upper
+hemisphere and refined to 0.25 degree. The parts' SH come from their lat-long maps
+(:func:`physrelight.sh.project_envmap`, 64 x 128). The sky a camera sees (:func:`sky_view`) is the
+fitted parts evaluated along each ray, so it is smooth at any resolution by construction: no
+blotch, no band. What order-2 SH cannot say (clouds, a treeline), the fit cannot either.
+
+All directions are world frame, Y up (DESIGN.md); radiance in the coefficients' units.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from physrelight import sh
+from physrelight._checks import Array
+
+__all__ = ["CLEAR_HORIZON", "CLEAR_ZENITH", "COMPONENTS", "FIT_GLOW_EXPONENT", "GLOW_EXPONENT", "HORIZON_Y", "SUN_RADIUS_DEG", "SkyFit",
+           "clear_sky", "fit_sky", "horizon_clamped", "overcast_sky", "sky_view", "sun_disc", "sun_glow"]
+
+CLEAR_ZENITH = (0.30, 0.50, 1.0)
+CLEAR_HORIZON = (0.80, 0.88, 1.0)
+GLOW_EXPONENT = 32
+"""The glow of the clear sky of a sun target (``learned.relighter.sun_sky_map``): the aureole."""
+FIT_GLOW_EXPONENT = 2.0
+"""The glow's exponent in :func:`fit_sky`: the widest of 32, 16, 8, 4, 2 scored best on the training
+panoramas' crops (study 31, round 2; the differences were within 0.2 dB)."""
+COMPONENTS = ("sun", "glow", "clear", "overcast", "ground")
+"""The parts of :func:`fit_sky`, in the order of :attr:`SkyFit.weights`' rows."""
+SUN_RADIUS_DEG = 0.27
+"""The sun's angular radius, for drawing its disc in a rendered sky."""
+HORIZON_Y = 0.02
+"""A model sky is looked up no lower than this (the sine of about 1 degree of elevation): it has no
+ground, so a sky pixel below the horizon (a mask or a pitch a little off) shows the sky just above it."""
+_MAP_HEIGHT = 64
+_COARSE_STEP_DEG = 2.0
+_FINE_STEP_DEG = 0.25
+
+
+def clear_sky(d: np.ndarray) -> np.ndarray:
+    """``(..., 3)`` radiance of the clear-sky gradient along unit directions ``d (..., 3)``; 0 below the horizon."""
+    cos_z = d[..., 1]
+    t = (1.0 - np.clip(cos_z, 0, 1))[..., None] ** 2  # 0 at the zenith, 1 at the horizon
+    colour_ = (1 - t) * np.array(CLEAR_ZENITH) + t * np.array(CLEAR_HORIZON)
+    return np.where(cos_z[..., None] > 0, colour_ * (1.0 + t), 0.0)
+
+
+def sun_glow(d: np.ndarray, s: np.ndarray, exponent: float = GLOW_EXPONENT) -> np.ndarray:
+    """``(...,)`` the white glow ``2 max(0, d . s)^exponent`` round the sun ``s (3,)``; 0 below the horizon."""
+    return np.where(d[..., 1] > 0, 2.0 * np.maximum(0.0, d @ s) ** exponent, 0.0)
+
+
+def overcast_sky(d: np.ndarray) -> np.ndarray:
+    """``(...,)`` the CIE overcast sky ``(1 + 2 cos theta) / 3`` (zenith 1); 0 below the horizon."""
+    cos_z = d[..., 1]
+    return np.where(cos_z > 0, (1.0 + 2.0 * np.clip(cos_z, 0, 1)) / 3.0, 0.0)
+
+
+def _sun_direction(elevation_deg: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray:
+    """``(..., 3)``: azimuth 0 is world -Z (where a level camera looks), positive towards +X."""
+    e, a = np.radians(elevation_deg), np.radians(azimuth_deg)
+    return np.stack([np.cos(e) * np.sin(a), np.sin(e), -np.cos(e) * np.cos(a)], -1)
+
+
+def _project(maps: np.ndarray) -> np.ndarray:
+    """``(9, C)`` order-2 SH of ``C`` scalar lat-long maps ``(H, 2H, C)``, three at a time."""
+    pad = (-maps.shape[-1]) % 3
+    m = np.concatenate([maps, np.zeros(maps.shape[:-1] + (pad,))], -1)
+    out = [np.asarray(sh.project_envmap(np.ascontiguousarray(m[..., i:i + 3]), order=2)) for i in range(0, m.shape[-1], 3)]
+    return np.concatenate(out, -1)[:, :maps.shape[-1]]
+
+
+@functools.lru_cache(maxsize=1)
+def _fixed_parts() -> np.ndarray:
+    """``(9, 3, 3)`` order-2 SH (coefficient, part, channel) of the parts that do not move with the sun:
+    the clear sky (each channel divided by its zenith value, so its weight is the zenith's radiance),
+    the overcast sky and the ground."""
+    from physrelight import envmap
+
+    d = envmap.directions(_MAP_HEIGHT, 2 * _MAP_HEIGHT)
+    clear = clear_sky(d) / np.array(CLEAR_ZENITH)
+    grey = np.stack([overcast_sky(d), (d[..., 1] < 0).astype(np.float64)], -1)
+    clear_sh, grey_sh = _project(clear), _project(grey)  # (9, channel), (9, part)
+    return np.concatenate([clear_sh[:, None, :], np.repeat(grey_sh[:, :, None], 3, -1)], 1)
+
+
+@functools.lru_cache(maxsize=8)
+def _glow_by_elevation(exponent: float) -> tuple[np.ndarray, np.ndarray]:
+    """Elevations (degrees, every :data:`_COARSE_STEP_DEG` from 0 to 90) and ``(E, 9)`` the glow's SH
+    for the sun at each, azimuth 0."""
+    from physrelight import envmap
+
+    d = envmap.directions(_MAP_HEIGHT, 2 * _MAP_HEIGHT)
+    elev = np.arange(0.0, 90.0 + 1e-9, _COARSE_STEP_DEG)
+    glows = np.stack([sun_glow(d, _sun_direction(np.array(e), np.array(0.0)), exponent) for e in elev], -1)
+    return elev, _project(glows).T
+
+
+def _glow_sh(elevation_deg: np.ndarray, azimuth_deg: np.ndarray, exponent: float) -> np.ndarray:
+    """``(N, 9)`` the glow's SH for suns at ``(N,)`` elevations and azimuths: linear in elevation
+    between the tabulated ones, turned exactly in azimuth."""
+    from physrelight import rotations
+
+    elev, table = _glow_by_elevation(float(exponent))
+    at0 = np.stack([np.interp(elevation_deg, elev, table[:, k]) for k in range(9)], -1)
+    R = np.stack([rotations.about_y(float(a)) for a in azimuth_deg])
+    return np.asarray(sh.rotate(np.repeat(at0[..., None], 3, -1), R))[..., 0]
+
+
+def _design(elevation_deg: np.ndarray, azimuth_deg: np.ndarray, exponent: float = GLOW_EXPONENT) -> np.ndarray:
+    """``(N, 3, 9, 5)``: per channel, the SH of each part (:data:`COMPONENTS`) for suns at the given directions."""
+    s = _sun_direction(elevation_deg, azimuth_deg)
+    n = len(s)
+    moving = np.stack([np.asarray(sh.basis(s, 2)).reshape(n, 9), _glow_sh(elevation_deg, azimuth_deg, exponent)], -1)
+    fixed = np.broadcast_to(_fixed_parts().transpose(2, 0, 1)[None], (n, 3, 9, 3))
+    return np.concatenate([np.broadcast_to(moving[:, None], (n, 3, 9, 2)), fixed], -1)
+
+
+def _nnls_batched(A: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Exact non-negative least squares ``min ||A x - b||, x >= 0`` for ``A (N, M, K)``, ``b (N, M, C)``
+    (every channel its own problem), by trying every support: the optimum is the unconstrained
+    solution on its support, which is feasible there, and a feasible support's solution is a
+    feasible point. Returns ``x (N, K, C)`` and the squared residuals ``(N, C)``."""
+    n, _, k = A.shape
+    best_x = torch.zeros(n, k, b.shape[-1], dtype=A.dtype)
+    best_r = (b * b).sum(1)  # the empty support
+    for size in range(1, k + 1):
+        for support in itertools.combinations(range(k), size):
+            As = A[..., list(support)]
+            # normal equations with a tiny ridge: the parts' SH can be nearly collinear
+            G = As.transpose(1, 2) @ As + 1e-12 * torch.eye(size, dtype=A.dtype)
+            xs = torch.linalg.solve(G, As.transpose(1, 2) @ b)
+            r = ((As @ xs - b) ** 2).sum(1)
+            ok = (xs >= -1e-12).all(1) & (r < best_r)
+            best_r = torch.where(ok, r, best_r)
+            x = torch.zeros_like(best_x)
+            x[:, list(support)] = xs.clamp_min(0)
+            best_x = torch.where(ok[:, None, :], x, best_x)
+    return best_x, best_r
+
+
+@dataclass(frozen=True)
+class SkyFit:
+    """The outdoor sky model that best explains an order-2 SH lighting (:func:`fit_sky`).
+
+    Attributes:
+        sun_direction: ``(3,)`` unit world direction towards the sun (elevation >= 0).
+        weights: ``(5, 3)`` non-negative weight of each part of :data:`COMPONENTS` per channel (the
+            sun's row is its irradiance on a surface facing it).
+        relative_residual: ``||SH(model) - SH(given)|| / ||SH(given)||`` over all 27 coefficients.
+        glow_exponent: the glow's lobe exponent (:func:`sun_glow`).
+    """
+
+    sun_direction: np.ndarray
+    weights: np.ndarray
+    relative_residual: float
+    glow_exponent: float = FIT_GLOW_EXPONENT
+
+    def sh(self) -> np.ndarray:
+        """``(9, 3)`` order-2 radiance SH of the fitted model, sun and ground included."""
+        e = math.degrees(math.asin(float(np.clip(self.sun_direction[1], -1, 1))))
+        a = math.degrees(math.atan2(float(self.sun_direction[0]), -float(self.sun_direction[2])))
+        return np.einsum("cmk,kc->mc", _design(np.array([e]), np.array([a]), self.glow_exponent)[0], self.weights)
+
+    def radiance(self, d: np.ndarray) -> np.ndarray:
+        """``(..., 3)`` the fitted sky (glow, clear and overcast parts; no sun disc, no ground) along
+        unit directions ``d (..., 3)``."""
+        w = self.weights
+        clear = clear_sky(d) / np.array(CLEAR_ZENITH)
+        return (sun_glow(d, self.sun_direction, self.glow_exponent)[..., None] * w[1] + clear * w[2]
+                + overcast_sky(d)[..., None] * w[3])
+
+
+def fit_sky(coeffs: Array, glow_exponent: float = FIT_GLOW_EXPONENT) -> SkyFit:
+    """The sky model of this module that best explains order-2 radiance SH ``coeffs (9, 3)`` (world frame),
+    its glow a lobe of ``glow_exponent`` (:func:`sun_glow`).
+
+    Raises:
+        ValueError: ``coeffs`` is not ``(9, 3)`` and finite, or has no positive DC term.
+    """
+    c = np.asarray(coeffs.detach().cpu().numpy() if isinstance(coeffs, torch.Tensor) else coeffs, dtype=np.float64)
+    if c.shape != (9, 3):
+        raise ValueError(f"coeffs must be order-2 SH of shape (9, 3), got {c.shape}")
+    if not np.all(np.isfinite(c)):
+        raise ValueError("coeffs must be finite")
+    if not (isinstance(glow_exponent, (int, float)) and 1.0 <= float(glow_exponent) <= 256.0):
+        raise ValueError(f"glow_exponent must be a number in [1, 256], got {glow_exponent!r}")
+    if not np.all(c[0] > 0):
+        raise ValueError(f"coeffs must have a positive DC term in every channel, got {c[0].tolist()}")
+
+    def solve(elev: np.ndarray, azim: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, float]:
+        n = len(elev)
+        A = torch.from_numpy(np.ascontiguousarray(_design(elev, azim, glow_exponent))).reshape(n * 3, 9, 5)
+        b = torch.from_numpy(np.ascontiguousarray(c.T)).reshape(1, 3, 9, 1).expand(n, 3, 9, 1).reshape(n * 3, 9, 1)
+        x, r = _nnls_batched(A, b)
+        total = r.reshape(n, 3).sum(1)
+        i = int(torch.argmin(total))
+        return i, x.reshape(n, 3, 5)[i].T.numpy(), elev[i:i + 1], float(total[i])
+
+    step = _COARSE_STEP_DEG
+    e, a = np.meshgrid(np.arange(0.0, 90.0 + 1e-9, step), np.arange(0.0, 360.0, step), indexing="ij")
+    e, a = e.ravel(), a.ravel()
+    i, _, _, _ = solve(e, a)
+    fine = np.arange(-step, step + 1e-9, _FINE_STEP_DEG)
+    fe, fa = np.meshgrid(np.clip(e[i] + fine, 0.0, 90.0), a[i] + fine, indexing="ij")
+    fe, fa = fe.ravel(), fa.ravel()
+    j, w, _, r2 = solve(fe, fa)
+    s = _sun_direction(np.array(fe[j]), np.array(fa[j]))
+    return SkyFit(sun_direction=s / np.linalg.norm(s), weights=w,
+                  relative_residual=math.sqrt(r2) / float(np.linalg.norm(c)), glow_exponent=float(glow_exponent))
+
+
+def horizon_clamped(rays: torch.Tensor) -> torch.Tensor:
+    """``rays (..., 3)`` unit world directions with those below :data:`HORIZON_Y` raised to it (a model
+    sky has no ground: a sky pixel below the horizon, a mask or a pitch a little off, shows the sky just
+    above the horizon rather than black)."""
+    low = rays[..., 1] < HORIZON_Y
+    raised = torch.cat([rays[..., :1], torch.full_like(rays[..., 1:2], HORIZON_Y), rays[..., 2:]], -1)
+    return torch.where(low[..., None], torch.nn.functional.normalize(raised, dim=-1), rays)
+
+
+def sun_disc(rays: torch.Tensor, sun_direction: Array) -> torch.Tensor:
+    """``(...,)`` radiance along ``rays (..., 3)`` of a sun disc of irradiance 1 towards ``sun_direction
+    (3,)`` (radius :data:`SUN_RADIUS_DEG`, radiance ``1 / (pi r^2)`` inside)."""
+    r = math.radians(SUN_RADIUS_DEG)
+    d = torch.as_tensor(np.asarray(sun_direction, dtype=np.float64), dtype=rays.dtype)
+    return (rays @ d > math.cos(r)).to(rays.dtype) / (math.pi * r * r)
+
+
+def sky_view(fit: SkyFit, rays: torch.Tensor) -> torch.Tensor:
+    """``(h, w, 3)`` the fitted sky along camera rays ``(h, w, S, 3)`` (world frame,
+    :func:`physrelight.panorama.camera_rays`), each pixel the mean over its ``S`` rays, with the sun's
+    disc (:func:`sun_disc` times the fitted sun's irradiance); rays are :func:`horizon_clamped`."""
+    r = horizon_clamped(rays.double())
+    out = torch.from_numpy(fit.radiance(r.numpy()))
+    out = out + sun_disc(r, fit.sun_direction)[..., None] * torch.from_numpy(fit.weights[0])
+    return out.mean(-2)

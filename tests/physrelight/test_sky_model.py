@@ -1,0 +1,114 @@
+"""Specification of the sky an SH lighting implies (physrelight.sky_model): the fit is exact NNLS, finds a
+sun it was made from, reproduces a sky made of its own parts, renders smooth radiance with the sun's disc
+where the sun is, and refuses what is not order-2 SH."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from physrelight import envmap, panorama, sh
+from physrelight import sky_model as sm
+
+
+def _model_sh(s: np.ndarray, weights: np.ndarray, exponent: float = sm.FIT_GLOW_EXPONENT) -> np.ndarray:
+    """Order-2 SH of the model's parts, projected from a fine lat-long map (independent of the fit's tables)."""
+    d = envmap.directions(256, 512)
+    env = (sm.sun_glow(d, s, exponent)[..., None] * weights[1] + sm.clear_sky(d) / np.array(sm.CLEAR_ZENITH) * weights[2]
+           + sm.overcast_sky(d)[..., None] * weights[3] + (d[..., 1] < 0)[..., None] * weights[4])
+    return np.asarray(sh.project_envmap(env, order=2)) + np.asarray(sh.project_sun(s, weights[0], order=2))
+
+
+def test_01_the_nnls_is_exact_against_every_support_by_brute_force() -> None:
+    """``_nnls_batched`` finds the non-negative least-squares optimum: it is feasible, and no point of a
+    random feasible cloud nor scipy's NNLS does better."""
+    scipy_opt = pytest.importorskip("scipy.optimize")
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(64, 9, 5))
+    b = rng.normal(size=(64, 9, 1))
+    x, r = sm._nnls_batched(torch.from_numpy(A), torch.from_numpy(b))
+    x, r = x.numpy(), r.numpy()
+    assert (x >= 0).all()
+    for i in range(64):
+        ref, res = scipy_opt.nnls(A[i], b[i, :, 0])
+        assert r[i, 0] == pytest.approx(res ** 2, rel=1e-9, abs=1e-12)
+        cloud = np.abs(rng.normal(size=(200, 5)))
+        assert (((A[i] @ cloud.T - b[i]) ** 2).sum(0) >= r[i, 0] - 1e-12).all()
+
+
+@pytest.mark.parametrize("elev, azim", [(37.3, 121.7), (8.6, -64.1), (71.1, 200.4)])
+def test_02_a_sky_made_of_the_models_parts_is_found_again(elev: float, azim: float) -> None:
+    """A sun off the search grid, a clear sky, haze and ground: the direction comes back within the fine
+    step (0.25 deg, up to its diagonal) and the SH within 1 % (the fit's parts are projected at 64 x 128,
+    the test's at 256 x 512)."""
+    s = sm._sun_direction(np.array(elev), np.array(azim))
+    w = np.array([[3.0, 2.7, 2.2], [0.0, 0.0, 0.0], [0.05, 0.08, 0.15], [0.02, 0.02, 0.03], [0.04, 0.035, 0.03]])
+    c = _model_sh(s, w)
+    fit = sm.fit_sky(c)
+    assert math.degrees(math.acos(min(1.0, float(fit.sun_direction @ s)))) < 0.4
+    assert fit.relative_residual < 0.01
+    assert np.linalg.norm(fit.sh() - c) / np.linalg.norm(c) == pytest.approx(fit.relative_residual, abs=1e-6)
+    assert (fit.weights >= 0).all()
+
+
+def test_03_an_overcast_sky_is_all_overcast_and_renders_as_the_cie_sky() -> None:
+    """The CIE overcast sky's SH fits with no sun, and the sky seen through a camera is that sky's radiance."""
+    w = np.zeros((5, 3))
+    w[3] = [0.7, 0.7, 0.7]
+    c = _model_sh(np.array([0.0, 1.0, 0.0]), w)
+    fit = sm.fit_sky(c)
+    assert fit.relative_residual < 0.01
+    assert np.allclose(fit.weights[0], 0.0, atol=1e-3 * 0.7)
+    K = panorama.view_intrinsics(60.0, 48, 36)
+    rays = panorama.camera_rays(K, panorama.level_camera(0.0, 30.0), 36, 48, 2)
+    got = sm.sky_view(fit, rays).numpy()
+    d = sm.horizon_clamped(rays.double()).numpy()
+    want = (0.7 * sm.overcast_sky(d)).mean(-1)[..., None]
+    assert np.abs(got - want).max() < 0.01 * 0.7
+
+
+def test_04_the_suns_disc_is_where_the_sun_is_and_carries_its_irradiance() -> None:
+    """Looking straight at the fitted sun, the disc's pixels integrate to the sun's irradiance."""
+    s = sm._sun_direction(np.array(30.0), np.array(0.0))
+    w = np.zeros((5, 3))
+    w[0], w[2] = [2.0, 2.0, 2.0], [0.05, 0.08, 0.15]
+    fit = sm.fit_sky(_model_sh(s, w))
+    # a narrow camera pointed at the sun: 0.02 deg pixels, the disc (radius 0.27 deg) well resolved
+    n = 64
+    K = panorama.view_intrinsics(1.28, n, n)
+    T = panorama.level_camera(0.0, 30.0)
+    yaw = math.degrees(math.atan2(fit.sun_direction[0], -fit.sun_direction[2]))
+    T = panorama.level_camera(yaw, math.degrees(math.asin(fit.sun_direction[1])))
+    rays = panorama.camera_rays(K, T, n, n, 1)
+    img = sm.sky_view(fit, rays).numpy()
+    sky_only = fit.radiance(rays[..., 0, :].numpy())
+    pixel_sr = (math.radians(1.28) / n) ** 2
+    e = ((img - sky_only) * pixel_sr).sum((0, 1))
+    assert np.allclose(e, fit.weights[0], rtol=0.05)
+    assert (img[n // 2, n // 2] > img[0, 0]).all()
+
+
+def test_05_rays_below_the_horizon_see_the_sky_just_above_it() -> None:
+    d = torch.tensor([[0.0, -0.5, -math.sqrt(0.75)], [0.0, 0.6, -0.8]], dtype=torch.float64)
+    got = sm.horizon_clamped(d)
+    assert sm.HORIZON_Y <= float(got[0, 1]) < 2 * sm.HORIZON_Y
+    assert torch.allclose(got.norm(dim=-1), torch.ones(2, dtype=torch.float64))
+    assert got[0, 0] == 0.0 and float(got[0, 2]) < 0  # the same azimuth
+    assert torch.equal(got[1], d[1])
+
+
+@pytest.mark.parametrize("bad, match", [
+    (np.ones((9, 2)), "shape"), (np.full((9, 3), np.nan), "finite"), (np.zeros((9, 3)), "positive DC"),
+])
+def test_06_what_is_not_order_2_sh_is_refused(bad: np.ndarray, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        sm.fit_sky(bad)
+
+
+def test_06b_a_bad_glow_exponent_is_refused() -> None:
+    with pytest.raises(ValueError, match="glow_exponent"):
+        sm.fit_sky(np.eye(9, 3) + 1.0, glow_exponent=0.0)
