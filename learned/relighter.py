@@ -174,6 +174,9 @@ class Relighter:
         # The segmenter's sky is grown by sky-coloured pixels within this fraction of the short side
         # (learned.sky_segmentation.grow_sky_by_colour); 0, off, by default (study 28).
         self.sky_grow = 0.0
+        # SkyGAN's sky is blurred within the mask by a Gaussian of this fraction of the short side
+        # (learned.sky_gan.smooth_sky; None: SMOOTH_SIGMA, 1/8; 0: SkyGAN's own sky; study 31).
+        self.sky_smooth: float | None = None
         # A quotient-based renderer's gain for the target divided by its gain for the source lighting itself,
         # so a photo relit to its own lighting gets the quotient's ratio alone. Off: measured worse on data/val5
         # (l1 +0.0053 against the plain gain, +0.0011 against quotient; study 29).
@@ -462,8 +465,8 @@ class Relighter:
                 the working resolution) and ``"working_sky"``.
             seed: SkyGAN's noise (same seed, same sky).
             smooth: the Gaussian SkyGAN's sky is blurred by within the mask, a fraction of the short
-                side (:func:`learned.sky_gan.smooth_sky`); None: :data:`learned.sky_gan.SMOOTH_SIGMA`;
-                0: SkyGAN's own sky, blotches and all.
+                side (:func:`learned.sky_gan.smooth_sky`); None: ``self.sky_smooth``, or
+                :data:`learned.sky_gan.SMOOTH_SIGMA` when that is None; 0: SkyGAN's own sky, blotches and all.
 
         Returns:
             ``(B, 3, H, W)``: ``relit`` with the generated sky on ``sky``; ``relit`` itself when no
@@ -475,7 +478,7 @@ class Relighter:
         # foreground and the target; the sky is smooth, so upsampling it loses nothing.
         from .sky_gan import SMOOTH_SIGMA, generate_sky, smooth_sky
 
-        smooth = SMOOTH_SIGMA if smooth is None else smooth
+        smooth = smooth if smooth is not None else self.sky_smooth if self.sky_smooth is not None else SMOOTH_SIGMA
         if not (isinstance(smooth, (int, float)) and smooth >= 0):
             raise ValueError(f"smooth must be a fraction of the short side >= 0, got {smooth!r}")
         painted = generate_sky(self.sky_generator, working["relit"], working_sky, working["target"], seed=seed)

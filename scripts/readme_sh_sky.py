@@ -1,0 +1,72 @@
+"""The README's figure of the sky an SH target gets: rocket.jpg relit to order-2 SH (shipped weights).
+
+    .venv/bin/python scripts/readme_sh_sky.py [--out docs/images/rocket_sh_sky.png]
+
+Rows: the SH of the shipped city and forest HDRIs (``sh.project_envmap(envmap.read(...), order=2)``).
+Columns: SkyGAN's own sky (``Relighter.sky_smooth = 0``, the default before study 31) | the default
+(SkyGAN blurred within the mask, ``--sky-source gan``) | the sky model fitted to the SH
+(``--sky-source fit``). Everything else is the command line's defaults (``--method proposed --exposure
+auto``, field of view 60 degrees, pitch from the sky). No ground truth: for the eye.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+COLUMNS = ("SkyGAN's own sky (before)", "default: SkyGAN, smoothed", "--sky-source fit")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default=str(ROOT / "docs" / "images" / "rocket_sh_sky.png"))
+    args = ap.parse_args()
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from skimage import data
+
+    from learned import Relighter
+    from physrelight import envmap, io, sh
+
+    t0 = time.perf_counter()
+    r = Relighter.load()
+    photo = data.rocket()
+    rows = []
+    for name in ("city", "forest"):
+        coeffs = np.asarray(sh.project_envmap(envmap.read(ROOT / "physrelight" / "data" / "hdri" / f"{name}.exr"), 2))
+        row = []
+        for smooth, source in ((0.0, "gan"), (None, "gan"), (None, "fit")):
+            r.sky_smooth = smooth
+            row.append(r.relight(photo, coeffs, method="proposed", exposure="auto", sky_source=source))
+        r.sky_smooth = None
+        rows.append((f"{name} HDRI's SH", row))
+    fig, axes = plt.subplots(len(rows), len(COLUMNS), figsize=(3.2 * len(COLUMNS), 2.3 * len(rows) + 0.4), squeeze=False)
+    for i, (name, row) in enumerate(rows):
+        for j, img in enumerate(row):
+            ax = axes[i, j]
+            ax.imshow(np.clip(img, 0, 1))
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title(COLUMNS[j], fontsize=9)
+            if j == 0:
+                ax.set_ylabel(name, fontsize=9)
+    fig.tight_layout()
+    with io.atomic_path(args.out, ".png") as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    print(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s ({platform.processor() or platform.machine()}, "
+          f"{os.cpu_count()} cores)")
+
+
+if __name__ == "__main__":
+    main()
