@@ -13,7 +13,7 @@ curve. Results come back as the type given: numpy ``(H, W, C)`` or torch
 radiance SH (``(B, 9, 3)`` for a batch).
 
 Targets: SH coefficients ``(9, 3)``, an environment map (array ``(H, 2H, 3)`` or an EXR
-path) or a sun direction ``(3,)`` (a white sun plus a uniform fill sky), all in the *world* frame (Y up), rotated into the camera with ``world_to_camera``
+path) or a sun direction ``(3,)`` (a sun of its elevation's colour plus a clear or overcast sky), all in the *world* frame (Y up), rotated into the camera with ``world_to_camera``
 (``(4, 4)`` or its ``(3, 3)`` rotation); without it the camera is assumed level and
 looking along world -Z (camera frame = world frame).
 """
@@ -303,7 +303,8 @@ class Relighter:
             target = envmap.read(target)
         t = np.asarray(target.detach().cpu().double() if isinstance(target, torch.Tensor) else target, np.float64)
         if t.shape == (3,):
-            coeffs = None if sky == "overcast" else sh.project_sun(_sun_direction(t), np.ones(3), order=2)
+            d = _sun_direction(t)
+            coeffs = None if sky == "overcast" else sh.project_sun(d, _sun_rgb(d), order=2)
         elif t.ndim == 3 and t.shape[-1] == 3 and t.shape[1] == 2 * t.shape[0]:
             sun = envmap_sun(t)
             coeffs = None if sun is None else np.asarray(sh.project_envmap(sun, order=2))
@@ -744,13 +745,21 @@ def _sun_direction(direction: Any) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
+def _sun_rgb(direction: np.ndarray) -> np.ndarray:
+    """``(3,)`` the colour of a sun towards unit ``direction`` (luminance 1, white at the zenith):
+    :func:`physrelight.sky_model.sun_colour` at its elevation."""
+    from physrelight.sky_model import sun_colour
+
+    return sun_colour(math.degrees(math.asin(float(np.clip(direction[1], -1.0, 1.0)))))
+
+
 def sun_sky_map(sky: str = "clear", direction: Any = (0.0, 1.0, 0.0), height: int = 64) -> np.ndarray:
     """``(height, 2 height, 3)`` the sky of :func:`sun_lighting` without its sun, world frame.
 
     ``"clear"``: a clear sky, deep blue (0.30, 0.50, 1.0) at the zenith turning pale
-    (0.80, 0.88, 1.0) and twice as bright towards the horizon, with a white glow round the sun
-    (``2 max(0, d . s)^32``), scaled so its order-2 irradiance on a horizontal surface is 0.3
-    (green) against the sun's 1. ``"overcast"``: the grey CIE overcast sky
+    (0.80, 0.88, 1.0) and twice as bright towards the horizon, with a glow of the sun's colour round
+    it (``2 max(0, d . s)^32``), scaled so its order-2 irradiance on a horizontal surface is 0.3
+    (green) against the sun's luminance 1. ``"overcast"``: the grey CIE overcast sky
     ``L(theta) = L_z (1 + 2 cos theta) / 3``, scaled to order-2 irradiance 1 on a horizontal
     surface; ``direction`` is ignored. Both are dark below the horizon.
     """
@@ -765,7 +774,9 @@ def sun_sky_map(sky: str = "clear", direction: Any = (0.0, 1.0, 0.0), height: in
     if sky == "overcast":
         env = np.repeat(overcast_sky(d)[..., None], 3, axis=-1)
         return env / float(sh.irradiance(sh.project_envmap(env, order=2), up)[0, 1])
-    env = clear_sky(d) + sun_glow(d, _sun_direction(direction))[..., None]
+    s = _sun_direction(direction)
+    # the glow round the sun is forward-scattered sunlight: it takes the sun's colour
+    env = clear_sky(d) + sun_glow(d, s)[..., None] * _sun_rgb(s)
     # Scale so the order-2 irradiance the image model sees on a horizontal surface is 0.3 in green.
     return env * (0.3 / float(sh.irradiance(sh.project_envmap(env, order=2), up)[0, 1]))
 
@@ -773,8 +784,10 @@ def sun_sky_map(sky: str = "clear", direction: Any = (0.0, 1.0, 0.0), height: in
 def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
     """Order-2 radiance SH ``(9, 3)`` (world frame) of a simple outdoor lighting.
 
-    ``"clear"``: a white delta sun of irradiance 1 towards ``direction`` plus the clear sky of
-    :func:`sun_sky_map` (0.3 of order-2 irradiance on a horizontal surface: soft fill light).
+    ``"clear"``: a delta sun towards ``direction`` of luminance 1 on a surface facing it, white at the
+    zenith and warmer as it sinks (its light crosses more air: :func:`physrelight.sky_model.sun_colour`,
+    a clear atmosphere's Rayleigh and aerosol extinction), plus the clear sky of :func:`sun_sky_map`
+    (0.3 of order-2 irradiance on a horizontal surface: soft fill light).
     ``"overcast"``: the CIE overcast sky of :func:`sun_sky_map`, no sun; the direction is
     ignored. Skies are projected from a 64 x 128 map.
     """
@@ -782,7 +795,7 @@ def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
     coeffs = np.asarray(sh.project_envmap(sun_sky_map(sky, d), order=2))
     if sky == "overcast":
         return coeffs
-    return sh.project_sun(d, np.ones(3), order=2) + coeffs
+    return sh.project_sun(d, _sun_rgb(d), order=2) + coeffs
 
 
 
@@ -835,7 +848,7 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     An env map is looked up through the pinhole camera (``K``, ``world_to_camera``) by
     :func:`physrelight.panorama.view` (one ray per pixel: a photo's pixel is finer than a map's
     texel); a sun target is :func:`sun_sky_map` plus the sun's disc (radius
-    :data:`physrelight.sky_model.SUN_RADIUS_DEG`, irradiance 1). ``azimuth_deg`` turns the target about +Y as
+    :data:`physrelight.sky_model.SUN_RADIUS_DEG`, luminance 1, the sun's colour). ``azimuth_deg`` turns the target about +Y as
     :func:`rotate_azimuth` does (the camera is turned the other way).
 
     Raises:
@@ -855,7 +868,8 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     rays = horizon_clamped(panorama.camera_rays(K, R, height, width, 1))
     out = panorama.look_up(env, rays)
     if sky == "clear":
-        out = out + sun_disc(rays[..., 0, :], _sun_direction(target)).to(out.dtype)[..., None]
+        d = _sun_direction(target)
+        out = out + (sun_disc(rays[..., 0, :], d)[..., None] * torch.from_numpy(_sun_rgb(d))).to(out.dtype)
     return out
 
 
