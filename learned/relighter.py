@@ -886,17 +886,25 @@ def fitted_sky(coeffs: Any, K: Any, world_to_camera: Any, height: int, width: in
     return sky_view(fit, panorama.camera_rays(K, world_to_camera, height, width, 1)).float()
 
 
-def estimate_pitch(sky: torch.Tensor, K: Any, limits: tuple[float, float] = (-30.0, 45.0)) -> float:
+PITCH_QUANTILE = 1.0
+"""The percentile of the columns' sky reach :func:`estimate_pitch` takes as the horizon: the sky's lowest
+reach, nearest the horizon (study 32: mean absolute error 9.93 -> 8.32 deg on the training panoramas' crops
+against 0.9; sunrise, read once afterwards, 5.10 -> 4.20)."""
+
+
+def estimate_pitch(sky: torch.Tensor, K: Any, limits: tuple[float, float] = (-30.0, 45.0),
+                   quantile: float = PITCH_QUANTILE) -> float:
     """The pitch (degrees, up positive) of a level camera, from where its sky comes down to.
 
     In each column whose top pixel is sky, the sky runs down from the top border to some row;
     between buildings, trees and towers it comes down to the horizon, so the horizon is taken at
-    the 90th percentile of those rows, ``v_h``, and a level camera pitched up by ``p`` has its
+    the lowest of those rows (:data:`PITCH_QUANTILE`), ``v_h``, and a level camera pitched up by ``p`` has its
     horizon at ``v_h = c_y + f_y tan(p)``. Without sky at the top: 0 (a level camera).
 
     Args:
         sky: ``(H, W)`` bool. K: ``(3, 3)`` intrinsics of the photo.
         limits: the estimate is clamped to this range.
+        quantile: the percentile of the columns' sky reach taken as the horizon (study 32).
     """
     if sky.ndim != 2:
         raise ValueError(f"sky must have shape (H, W), got {tuple(sky.shape)}")
@@ -905,7 +913,9 @@ def estimate_pitch(sky: torch.Tensor, K: Any, limits: tuple[float, float] = (-30
     if not bool(cols.any()):
         return 0.0
     run = torch.cumprod(sky[:, cols].to(torch.int64), dim=0).sum(0).double()  # sky rows from the top
-    v_h = float(torch.quantile(run, 0.9))
+    if not 0.0 <= float(quantile) <= 1.0:
+        raise ValueError(f"quantile must be in [0, 1], got {quantile!r}")
+    v_h = float(torch.quantile(run, float(quantile)))
     p = math.degrees(math.atan((v_h - Kt[1, 2]) / Kt[1, 1]))
     return float(min(max(p, limits[0]), limits[1]))
 

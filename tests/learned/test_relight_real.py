@@ -123,6 +123,22 @@ def test_05_the_pitch_comes_from_where_the_sky_comes_down_to() -> None:
     assert estimate_pitch(torch.zeros(H, W, dtype=torch.bool), K) == 0.0
 
 
+def test_05b_the_horizon_is_the_skys_lowest_reach() -> None:
+    """A treeline hides the horizon in 95 % of the columns; the open 5 % give the pitch (study 32), where the
+    old 90th percentile read the treeline."""
+    from learned.relighter import estimate_pitch
+
+    H, W, fov, pitch = 120, 160, 60.0, 6.0
+    K = panorama.view_intrinsics(fov, W, H)
+    rays = panorama.camera_rays(K, panorama.level_camera(0.0, pitch), H, W, 1)[..., 0, :]
+    sky = rays[..., 1] > 0
+    sky[:, 8:] &= torch.arange(H)[:, None] < 50  # trees above the horizon, but for 8 open columns
+    assert abs(estimate_pitch(sky, K) - pitch) < 0.6
+    assert estimate_pitch(sky, K, quantile=0.9) < pitch - 2.0
+    with pytest.raises(ValueError, match="quantile"):
+        estimate_pitch(sky, K, quantile=1.5)
+
+
 @pytest.mark.parametrize("name", ["astronaut", "coffee", "chelsea"])
 def test_06_a_photo_without_sky_gets_a_warning_and_no_painted_sky(relighter, name) -> None:
     skimage = pytest.importorskip("skimage")
