@@ -14,13 +14,12 @@ No ground truth: for the eye. The machine and the seconds go to stdout.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
+from figure_grid import save_grid
 
 ROOT = Path(__file__).resolve().parents[1]
 COLUMNS = ("input", "relit: forest HDRI", "relit: sun 10 deg up, 60 right", "relit: overcast")
@@ -32,15 +31,11 @@ def main() -> None:
     ap.add_argument("--out", default=str(ROOT / "docs" / "images" / "relight_rocket.png"))
     args = ap.parse_args()
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from skimage import data
 
     from learned import Relighter
     from learned.relight_cli import sun_direction
-    from physrelight import envmap, io
+    from physrelight import envmap
     from synth.panorama_crops import HELDOUT_DIR, load_panorama, make_crops
 
     t0 = time.perf_counter()
@@ -59,26 +54,7 @@ def main() -> None:
                 warnings.simplefilter("ignore", UserWarning)
                 row.append(relighter.relight(photo, target, method="proposed", exposure="auto", fov_deg=fov, **kw))
         rows.append((name, row))
-    h = max(r[0].shape[0] / r[0].shape[1] for _, r in rows)
-    fig, axes = plt.subplots(len(rows), len(COLUMNS), figsize=(3.0 * len(COLUMNS), 3.0 * h * len(rows) + 0.6),
-                             squeeze=False)
-    for i, (name, row) in enumerate(rows):
-        for j, img in enumerate(row):
-            ax = axes[i, j]
-            ax.imshow(np.clip(img, 0, 1))
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if i == 0:
-                ax.set_title(COLUMNS[j], fontsize=9)
-            if j == 0:
-                ax.set_ylabel(name, fontsize=9)
-    fig.tight_layout()
-    with io.atomic_path(args.out, ".png") as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
-    print(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s ({platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} cores)")
-
+    save_grid(rows, COLUMNS, args.out, started=t0)
 
 if __name__ == "__main__":
     main()

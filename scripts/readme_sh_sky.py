@@ -12,12 +12,11 @@ auto``, field of view 60 degrees, pitch from the sky). No ground truth: for the 
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
+from figure_grid import save_grid
 
 ROOT = Path(__file__).resolve().parents[1]
 COLUMNS = ("SkyGAN's own sky (before)", "default: SkyGAN, smoothed", "--sky-source fit")
@@ -28,14 +27,10 @@ def main() -> None:
     ap.add_argument("--out", default=str(ROOT / "docs" / "images" / "rocket_sh_sky.png"))
     args = ap.parse_args()
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from skimage import data
 
     from learned import Relighter
-    from physrelight import envmap, io, sh
+    from physrelight import envmap, sh
 
     t0 = time.perf_counter()
     r = Relighter.load()
@@ -49,24 +44,7 @@ def main() -> None:
             row.append(r.relight(photo, coeffs, method="proposed", exposure="auto", sky_source=source))
         r.sky_smooth = None
         rows.append((f"{name} HDRI's SH", row))
-    fig, axes = plt.subplots(len(rows), len(COLUMNS), figsize=(3.2 * len(COLUMNS), 2.3 * len(rows) + 0.4), squeeze=False)
-    for i, (name, row) in enumerate(rows):
-        for j, img in enumerate(row):
-            ax = axes[i, j]
-            ax.imshow(np.clip(img, 0, 1))
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if i == 0:
-                ax.set_title(COLUMNS[j], fontsize=9)
-            if j == 0:
-                ax.set_ylabel(name, fontsize=9)
-    fig.tight_layout()
-    with io.atomic_path(args.out, ".png") as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
-    print(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s ({platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} cores)")
-
+    save_grid(rows, COLUMNS, args.out, started=t0)
 
 if __name__ == "__main__":
     main()
