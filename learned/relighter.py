@@ -858,7 +858,7 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
 
     kind = sky_map_kind(target)
     if kind == "sh":
-        raise ValueError("an SH target has no sky to render: use sky source 'gan' or 'keep'")
+        raise ValueError("an SH target has no sky to render: use sky source 'fit', 'gan' or 'keep'")
     T = np.asarray(world_to_camera, dtype=np.float64)
     R = T[:3, :3] @ rotations.about_y(float(azimuth_deg))  # target'(w) = target(R_y^T w)
     if kind == "env":
