@@ -240,7 +240,8 @@ def photo_file(tmp_path) -> Path:
 
 
 @pytest.mark.parametrize("case", ["rgb_mask", "all_sky", "no_sky", "sky_with_env", "bad_source_env", "fps",
-                                  "sky_grow", "unwritable", "layers_is_file", "source_without_quotient"])
+                                  "sky_grow", "unwritable", "layers_is_file", "source_without_quotient",
+                                  "sh_target_sky"])
 def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, capsys, case) -> None:
     out = tmp_path / "out" / "x.png"
     out.parent.mkdir()
@@ -268,6 +269,9 @@ def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, 
         args += ["--layers", str(tmp_path / "L")]
     elif case == "source_without_quotient":
         args += ["--source-env", str(FOREST), "--method", "lambertian_sh"]
+    elif case == "sh_target_sky":  # an SH target has no sky of its own to render
+        np.save(tmp_path / "t.npy", np.asarray(sh.project_envmap(envmap.read(FOREST), order=2)))
+        args[args.index("--env"): args.index("--env") + 2] = ["--sh", str(tmp_path / "t.npy"), "--sky-source", "target"]
     if case in ("fps", "sky_grow"):
         with pytest.raises(SystemExit) as exit_:
             _cli(args, capsys)
@@ -432,3 +436,20 @@ def test_10b_an_sh_targets_default_sky_is_skygan_smoothed(relighter) -> None:
     smoothed = relighter.paint_sky(full["relit"], sky, full["working"], full["working_sky"])
     to8 = lambda x: (colour.to_ldr(x.clamp_min(0))[0].permute(1, 2, 0).numpy() * 255)  # noqa: E731
     assert roughness(to8(smoothed)) < 0.5 * roughness(to8(own))
+
+
+def test_11_the_command_lines_fitted_sky_is_the_apis(tmp_path, photo_file, capsys, relighter) -> None:
+    """``relight --sh F --sky-source fit`` writes what ``Relighter.relight(..., sky_source="fit")`` gives
+    with the command line's defaults, on the user's mask."""
+    np.save(tmp_path / "t.npy", coeffs := np.asarray(sh.project_envmap(envmap.read(FOREST), order=2)))
+    mask = np.zeros((60, 90), np.float32)
+    mask[:24] = 1.0
+    io.write_png(tmp_path / "m.png", mask)
+    out = tmp_path / "o.png"
+    rc, err = _cli(["relight", str(photo_file), "--sh", str(tmp_path / "t.npy"), "--sky-source", "fit", "--mask",
+                    str(tmp_path / "m.png"), "-o", str(out), "--threads", "1"], capsys)
+    assert rc == 0, err
+    want = relighter.relight(_outdoor(), coeffs, sky_mask=mask > 0.5, method="proposed", exposure="auto",
+                             sky_source="fit")
+    got = io.read_photo(out).image.astype(np.float64) * 255
+    assert np.abs(got - np.round(want * 255)).max() <= 1.0

@@ -153,3 +153,19 @@ def test_08_the_suns_colour_is_mitsubas_hosek_wilkie_sun(turbidity: float) -> No
         c = sm.sun_colour(e) / sm.sun_colour(89.0)
         assert c[0] / c[1] == pytest.approx(m[0] / m[1], rel=0.05), e
         assert c[2] / c[1] == pytest.approx(m[2] / m[1], rel=tol_b), e
+
+
+def test_09_any_order_2_lighting_gets_a_valid_sky() -> None:
+    """Where the model cannot explain the SH (random coefficients, an indoor studio's lamps) the fit is still
+    a sky: finite non-negative weights, a sun above the horizon, a residual no worse than no sky at all (1),
+    and finite radiance along any ray."""
+    rng = np.random.default_rng(0)
+    rays = torch.nn.functional.normalize(torch.randn(16, 24, 2, 3, generator=torch.Generator().manual_seed(0),
+                                                     dtype=torch.float64), dim=-1)
+    for _ in range(4):
+        c = rng.normal(size=(9, 3))
+        c[0] = np.abs(c[0]) + 0.1
+        fit = sm.fit_sky(c)
+        assert np.isfinite(fit.weights).all() and (fit.weights >= 0).all()
+        assert fit.sun_direction[1] >= -1e-12 and 0.0 <= fit.relative_residual <= 1.0 + 1e-9
+        assert torch.isfinite(sm.sky_view(fit, rays)).all()
