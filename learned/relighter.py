@@ -296,7 +296,8 @@ class Relighter:
     def target_sun(self, target: Any, world_to_camera: Any = None, sky: str = "clear") -> torch.Tensor | None:
         """``(9, 3)`` camera-frame radiance SH of the sun alone within a target (see
         :meth:`target_lighting`), or None when it has none: a sun direction's delta sun (clear sky),
-        an environment map's sun as :func:`envmap_sun` finds it; SH targets and overcast skies: None."""
+        an environment map's sun as :func:`envmap_sun` finds it, an SH target's the delta sun of the sky
+        model fitted to it (:func:`physrelight.sky_model.fit_sky`; study 33); overcast skies: None."""
         if isinstance(target, (str, os.PathLike)):
             from physrelight import envmap
 
@@ -308,6 +309,14 @@ class Relighter:
         elif t.ndim == 3 and t.shape[-1] == 3 and t.shape[1] == 2 * t.shape[0]:
             sun = envmap_sun(t)
             coeffs = None if sun is None else np.asarray(sh.project_envmap(sun, order=2))
+        elif t.shape == (9, 3) and np.all(np.isfinite(t)) and np.all(t[0] > 0):
+            from physrelight.sky_model import fit_sky
+
+            # An SH target says nothing of its sun; the fitted sky model's sun lets the quotient shade it by
+            # its exact cosine, as an env map's is (study 33: data/val5 -0.0009 l1; data/heldout +0.0003, n.s.).
+            fit = fit_sky(t)
+            coeffs = np.asarray(sh.project_sun(fit.sun_direction, fit.weights[0], order=2)) \
+                if bool((fit.weights[0] > 0).any()) else None
         else:
             coeffs = None
         return None if coeffs is None else torch.as_tensor(sh.rotate(coeffs, _rotation(world_to_camera)))

@@ -453,3 +453,21 @@ def test_11_the_command_lines_fitted_sky_is_the_apis(tmp_path, photo_file, capsy
                              sky_source="fit")
     got = io.read_photo(out).image.astype(np.float64) * 255
     assert np.abs(got - np.round(want * 255)).max() <= 1.0
+
+
+def test_12_an_sh_targets_sun_is_the_one_its_sh_came_from(relighter) -> None:
+    """``target_sun`` of the SH of a sun target finds that sun (study 33): the direction within half a degree and
+    the irradiance within 5 %, in the camera frame; an overcast sky's SH gets no sun."""
+    from learned.relighter import _sun_rgb, sun_lighting
+
+    d = np.array([0.4, 0.55, -0.73])
+    d /= np.linalg.norm(d)
+    T = panorama.level_camera(20.0, 5.0)
+    got = relighter.target_sun(sun_lighting(d), T).double().numpy()
+    want = np.asarray(sh.rotate(sh.project_sun(d, _sun_rgb(d), order=2), T[:3, :3]))
+    s_got, e_got = sh.sun_of(got)
+    s_want, e_want = sh.sun_of(want)
+    assert math.degrees(math.acos(min(1.0, float(np.dot(s_got, s_want))))) < 0.5
+    assert np.allclose(e_got, e_want, rtol=0.05)
+    overcast = relighter.target_sun(sun_lighting(d, "overcast"))
+    assert overcast is None or float(overcast.abs().max()) < 1e-3 * float(np.abs(sun_lighting(d, "overcast")).max())
