@@ -196,11 +196,13 @@ def _glow_by_elevation(exponent: float) -> tuple[np.ndarray, np.ndarray]:
 def _glow_sh(elevation_deg: np.ndarray, azimuth_deg: np.ndarray, exponent: float) -> np.ndarray:
     """``(N, 9)`` the glow's SH for suns at ``(N,)`` elevations and azimuths: linear in elevation
     between the tabulated ones, turned exactly in azimuth."""
-    from physrelight import rotations
-
     elev, table = _glow_by_elevation(float(exponent))
     at0 = np.stack([np.interp(elevation_deg, elev, table[:, k]) for k in range(9)], -1)
-    R = np.stack([rotations.about_y(float(a)) for a in azimuth_deg])
+    t = np.radians(np.asarray(azimuth_deg, dtype=np.float64))
+    c, s_ = np.cos(t), np.sin(t)
+    zero, one = np.zeros_like(t), np.ones_like(t)
+    # rotations.about_y(a) for every azimuth at once (right-hand rule about +Y)
+    R = np.stack([np.stack([c, zero, s_], -1), np.stack([zero, one, zero], -1), np.stack([-s_, zero, c], -1)], -2)
     return np.asarray(sh.rotate(np.repeat(at0[..., None], 3, -1), R))[..., 0]
 
 
@@ -219,19 +221,24 @@ def _nnls_batched(A: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch
     solution on its support, which is feasible there, and a feasible support's solution is a
     feasible point. Returns ``x (N, K, C)`` and the squared residuals ``(N, C)``."""
     n, _, k = A.shape
+    # Every support's normal equations are blocks of one Gram matrix: form it once.
+    gram = A.transpose(1, 2) @ A  # (N, K, K)
+    atb = A.transpose(1, 2) @ b  # (N, K, C)
+    btb = (b * b).sum(1)  # (N, C)
     best_x = torch.zeros(n, k, b.shape[-1], dtype=A.dtype)
-    best_r = (b * b).sum(1)  # the empty support
+    best_r = btb.clone()  # the empty support
     for size in range(1, k + 1):
         for support in itertools.combinations(range(k), size):
-            As = A[..., list(support)]
-            # normal equations with a tiny ridge: the parts' SH can be nearly collinear
-            G = As.transpose(1, 2) @ As + 1e-12 * torch.eye(size, dtype=A.dtype)
-            xs = torch.linalg.solve(G, As.transpose(1, 2) @ b)
-            r = ((As @ xs - b) ** 2).sum(1)
+            idx = list(support)
+            # a tiny ridge: the parts' SH can be nearly collinear
+            G = gram[:, idx][:, :, idx] + 1e-12 * torch.eye(size, dtype=A.dtype)
+            g = atb[:, idx]
+            xs = torch.linalg.solve(G, g)
+            r = (btb - 2 * (xs * g).sum(1) + (xs * (G @ xs)).sum(1)).clamp_min(0)
             ok = (xs >= -1e-12).all(1) & (r < best_r)
             best_r = torch.where(ok, r, best_r)
             x = torch.zeros_like(best_x)
-            x[:, list(support)] = xs.clamp_min(0)
+            x[:, idx] = xs.clamp_min(0)
             best_x = torch.where(ok[:, None, :], x, best_x)
     return best_x, best_r
 
@@ -270,7 +277,8 @@ class SkyFit:
 
 def fit_sky(coeffs: Array, glow_exponent: float = FIT_GLOW_EXPONENT) -> SkyFit:
     """The sky model of this module that best explains order-2 radiance SH ``coeffs (9, 3)`` (world frame),
-    its glow a lobe of ``glow_exponent`` (:func:`sun_glow`).
+    its glow a lobe of ``glow_exponent`` (:func:`sun_glow`). About 0.3 s at one thread; the last 16 fits are
+    remembered (a relighting asks for its target's sun and for its sky), so treat the result as read-only.
 
     Raises:
         ValueError: ``coeffs`` is not ``(9, 3)`` and finite, or has no positive DC term.
@@ -284,6 +292,12 @@ def fit_sky(coeffs: Array, glow_exponent: float = FIT_GLOW_EXPONENT) -> SkyFit:
         raise ValueError(f"glow_exponent must be a number in [1, 256], got {glow_exponent!r}")
     if not np.all(c[0] > 0):
         raise ValueError(f"coeffs must have a positive DC term in every channel, got {c[0].tolist()}")
+    return _fit_sky(c.tobytes(), float(glow_exponent))
+
+
+@functools.lru_cache(maxsize=16)
+def _fit_sky(key: bytes, glow_exponent: float) -> SkyFit:
+    c = np.frombuffer(key, dtype=np.float64).reshape(9, 3)
 
     def solve(elev: np.ndarray, azim: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, float]:
         n = len(elev)
@@ -302,8 +316,11 @@ def fit_sky(coeffs: Array, glow_exponent: float = FIT_GLOW_EXPONENT) -> SkyFit:
     fe, fa = np.meshgrid(np.clip(e[i] + fine, 0.0, 90.0), a[i] + fine, indexing="ij")
     fe, fa = fe.ravel(), fa.ravel()
     j, w, _, r2 = solve(fe, fa)
-    s = _sun_direction(np.array(fe[j]), np.array(fa[j]))
-    return SkyFit(sun_direction=s / np.linalg.norm(s), weights=w,
+    s = _sun_direction(np.array(fe[j]), np.array(fa[j])) / 1.0
+    s, w = s / np.linalg.norm(s), np.array(w)
+    s.setflags(write=False)  # remembered by the cache: shared between callers
+    w.setflags(write=False)
+    return SkyFit(sun_direction=s, weights=w,
                   relative_residual=math.sqrt(r2) / float(np.linalg.norm(c)), glow_exponent=float(glow_exponent))
 
 
@@ -320,7 +337,7 @@ def sun_disc(rays: torch.Tensor, sun_direction: Array) -> torch.Tensor:
     """``(...,)`` radiance along ``rays (..., 3)`` of a sun disc of irradiance 1 towards ``sun_direction
     (3,)`` (radius :data:`SUN_RADIUS_DEG`, radiance ``1 / (pi r^2)`` inside)."""
     r = math.radians(SUN_RADIUS_DEG)
-    d = torch.as_tensor(np.asarray(sun_direction, dtype=np.float64), dtype=rays.dtype)
+    d = torch.tensor(np.array(sun_direction, dtype=np.float64), dtype=rays.dtype)
     return (rays @ d > math.cos(r)).to(rays.dtype) / (math.pi * r * r)
 
 
@@ -330,5 +347,5 @@ def sky_view(fit: SkyFit, rays: torch.Tensor) -> torch.Tensor:
     disc (:func:`sun_disc` times the fitted sun's irradiance); rays are :func:`horizon_clamped`."""
     r = horizon_clamped(rays.double())
     out = torch.from_numpy(fit.radiance(r.numpy()))
-    out = out + sun_disc(r, fit.sun_direction)[..., None] * torch.from_numpy(fit.weights[0])
+    out = out + sun_disc(r, fit.sun_direction)[..., None] * torch.from_numpy(np.array(fit.weights[0]))
     return out.mean(-2)
