@@ -652,7 +652,15 @@ class Relighter:
         K, T = reuse["camera"]
         turned = rotate_azimuth(target, azimuth_deg) if azimuth_deg else target
         target_cam = self.target_lighting(turned, T, sky_type).float()
-        suns: dict[str, torch.Tensor | None] = {"target_sun": self.target_sun(turned, T, sky_type)}
+        if azimuth_deg and sky_map_kind(target) == "env":
+            # rotate_azimuth projects a map to SH: take the map's own sun, turned with the camera as the
+            # map's sky is (target_sky), not the sun of a sky model fitted to its SH
+            from physrelight import rotations
+
+            T_turned = np.asarray(T, dtype=np.float64)[:3, :3] @ rotations.about_y(float(azimuth_deg))
+            suns: dict[str, torch.Tensor | None] = {"target_sun": self.target_sun(target, T_turned, sky_type)}
+        else:
+            suns = {"target_sun": self.target_sun(turned, T, sky_type)}
         source_cam = None
         if source is not None:
             if isinstance(source, (str, os.PathLike)):
