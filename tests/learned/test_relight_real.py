@@ -139,6 +139,29 @@ def test_05b_the_horizon_is_the_skys_lowest_reach() -> None:
         estimate_pitch(sky, K, quantile=1.5)
 
 
+def test_05c_vertical_edges_converge_to_the_pitch_they_are_seen_at() -> None:
+    """World-vertical stripes (meridians of a panorama) seen through a level camera pitched by p converge to
+    the up direction's vanishing point: ``pitch_from_verticals`` finds p within its 0.25 deg step and a half;
+    a featureless photo has no verticals. ``estimate_camera_pitch`` keeps the sky's pitch when the
+    vanishing point falls below it."""
+    from learned.relighter import estimate_camera_pitch, estimate_pitch, pitch_from_verticals
+
+    u = (np.arange(256) + 0.5) / 256
+    env = np.repeat(np.where((np.floor(u * 24) % 2) == 0, 1.0, 0.2)[None, :, None], 128, 0)
+    env = np.repeat(env, 3, -1).astype(np.float32)
+    H, W, fov = 96, 128, 60.0
+    K = panorama.view_intrinsics(fov, W, H)
+    for pitch in (-8.0, 0.0, 12.0, 25.0):
+        img = torch.as_tensor(panorama.view(torch.from_numpy(env), K, panorama.level_camera(10.0, pitch), H, W, 2))
+        got = pitch_from_verticals(img.permute(2, 0, 1).float(), K)
+        assert got is not None and abs(got - pitch) < 0.75, (pitch, got)
+    assert pitch_from_verticals(torch.full((3, H, W), 0.3), K) is None
+    sky = torch.zeros(H, W, dtype=torch.bool)
+    sky[:60] = True  # a sky down to row 60: pitch about +6 deg, above the stripes' 0
+    img = torch.as_tensor(panorama.view(torch.from_numpy(env), K, panorama.level_camera(10.0, 0.0), H, W, 2))
+    assert estimate_camera_pitch(img.permute(2, 0, 1).float(), sky, K) == estimate_pitch(sky, K)
+
+
 @pytest.mark.parametrize("name", ["astronaut", "coffee", "chelsea"])
 def test_06_a_photo_without_sky_gets_a_warning_and_no_painted_sky(relighter, name) -> None:
     skimage = pytest.importorskip("skimage")
