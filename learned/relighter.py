@@ -31,7 +31,7 @@ import torch
 from physrelight import colour, image_model, sh
 from physrelight.lighting_prior import LightingPrior
 from physrelight.quotient import SMOOTH_RADIUS, quotient_relight
-from physrelight.sky_model import horizon_clamped, sun_disc
+from physrelight.sky_model import FIT_GLOW_EXPONENT, horizon_clamped, sun_disc
 
 from . import checkpoint as ckpt
 from .lighting import WEIGHTS_DIR, load_prior
@@ -655,10 +655,8 @@ class Relighter:
         if azimuth_deg and sky_map_kind(target) == "env":
             # rotate_azimuth projects a map to SH: take the map's own sun, turned with the camera as the
             # map's sky is (target_sky), not the sun of a sky model fitted to its SH
-            from physrelight import rotations
-
-            T_turned = np.asarray(T, dtype=np.float64)[:3, :3] @ rotations.about_y(float(azimuth_deg))
-            suns: dict[str, torch.Tensor | None] = {"target_sun": self.target_sun(target, T_turned, sky_type)}
+            suns: dict[str, torch.Tensor | None] = {
+                "target_sun": self.target_sun(target, _turned_camera(T, azimuth_deg), sky_type)}
         else:
             suns = {"target_sun": self.target_sun(turned, T, sky_type)}
         source_cam = None
@@ -684,14 +682,12 @@ class Relighter:
 
         sky_from = sky_source or ("target" if sky_map_kind(target) != "sh" else "gan" if self.sky_generator else "keep")
         if new_sky and bool(sky.any()):
-            # A rendered sky comes in the relit foreground's units: the target was scaled by
-            # dc(out target) / dc(target) into the decomposition's (= the photo's linear) units.
-            k = float(dc_luminance(out["target"])[0] / dc_luminance(target_cam[None])[0])
             if sky_from in ("target", "fit"):
-                if sky_from == "target":
-                    radiance = target_sky(target, K, T, h, w, sky_type, azimuth_deg) * k
-                else:
-                    radiance = fitted_sky(self.target_lighting(turned, None, sky_type), K, T, h, w) * k
+                # A rendered sky comes in the relit foreground's units: the target was scaled by
+                # dc(out target) / dc(target) into the decomposition's (= the photo's linear) units.
+                k = float(dc_luminance(out["target"])[0] / dc_luminance(target_cam[None])[0])
+                radiance = (target_sky(target, K, T, h, w, sky_type, azimuth_deg) if sky_from == "target"
+                            else fitted_sky(self.target_lighting(turned, None, sky_type), K, T, h, w)) * k
                 relit = torch.where(sky, radiance.permute(2, 0, 1)[None].to(relit.dtype), relit)
             elif sky_from == "gan":
                 relit = self.paint_sky(relit, sky, out, small_sky, seed=seed)
@@ -871,13 +867,12 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     Raises:
         ValueError: an SH target (it has no sky to render).
     """
-    from physrelight import envmap, panorama, rotations
+    from physrelight import envmap, panorama
 
     kind = sky_map_kind(target)
     if kind == "sh":
         raise ValueError("an SH target has no sky to render: use sky source 'fit', 'gan' or 'keep'")
-    T = np.asarray(world_to_camera, dtype=np.float64)
-    R = T[:3, :3] @ rotations.about_y(float(azimuth_deg))  # target'(w) = target(R_y^T w)
+    R = _turned_camera(world_to_camera, azimuth_deg)
     if kind == "env":
         env = envmap.read(target) if isinstance(target, (str, os.PathLike)) else np.asarray(target)
         return torch.as_tensor(panorama.view(torch.as_tensor(env, dtype=torch.float32), K, R, height, width, 1))
@@ -890,16 +885,24 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     return out
 
 
+def _turned_camera(world_to_camera: Any, azimuth_deg: float) -> np.ndarray:
+    """``(3, 3)`` the camera rotation that sees a target turned by ``azimuth_deg`` about +Y as
+    :func:`rotate_azimuth` turns it: ``target'(w) = target(R_y^T w)``, so ``R = T R_y``."""
+    from physrelight import rotations
+
+    return np.asarray(world_to_camera, dtype=np.float64)[:3, :3] @ rotations.about_y(float(azimuth_deg))
+
+
 def fitted_sky(coeffs: Any, K: Any, world_to_camera: Any, height: int, width: int,
-               glow_exponent: float | None = None) -> torch.Tensor:
+               glow_exponent: float = FIT_GLOW_EXPONENT) -> torch.Tensor:
     """``(height, width, 3)`` the sky implied by world-frame order-2 SH ``coeffs (9, 3)`` as the photo's
     camera (``K``, ``world_to_camera``) sees it, in the coefficients' units: the outdoor sky model
     fitted to them (:func:`physrelight.sky_model.fit_sky`), one ray per pixel
     (:func:`physrelight.sky_model.sky_view`). Smooth by construction."""
     from physrelight import panorama
-    from physrelight.sky_model import FIT_GLOW_EXPONENT, fit_sky, sky_view
+    from physrelight.sky_model import fit_sky, sky_view
 
-    fit = fit_sky(coeffs, FIT_GLOW_EXPONENT if glow_exponent is None else glow_exponent)
+    fit = fit_sky(coeffs, glow_exponent)
     return sky_view(fit, panorama.camera_rays(K, world_to_camera, height, width, 1)).float()
 
 
@@ -925,13 +928,13 @@ def estimate_pitch(sky: torch.Tensor, K: Any, limits: tuple[float, float] = (-30
     """
     if sky.ndim != 2:
         raise ValueError(f"sky must have shape (H, W), got {tuple(sky.shape)}")
+    if not 0.0 <= float(quantile) <= 1.0:
+        raise ValueError(f"quantile must be in [0, 1], got {quantile!r}")
     Kt = np.asarray(K, dtype=np.float64)
     cols = sky[0]
     if not bool(cols.any()):
         return 0.0
     run = torch.cumprod(sky[:, cols].to(torch.int64), dim=0).sum(0).double()  # sky rows from the top
-    if not 0.0 <= float(quantile) <= 1.0:
-        raise ValueError(f"quantile must be in [0, 1], got {quantile!r}")
     v_h = float(torch.quantile(run, float(quantile)))
     p = math.degrees(math.atan((v_h - Kt[1, 2]) / Kt[1, 1]))
     return float(min(max(p, limits[0]), limits[1]))

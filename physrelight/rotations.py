@@ -32,6 +32,16 @@ def about_y(angle_deg: float) -> np.ndarray:
     return axis_angle([0.0, 1.0, 0.0], angle_deg)
 
 
+def about_y_many(angles_deg: np.ndarray) -> np.ndarray:
+    """:func:`about_y` for every angle of ``angles_deg (N,)`` at once: ``(N, 3, 3)`` float64."""
+    t = np.radians(np.asarray(angles_deg, dtype=np.float64))
+    if t.ndim != 1 or not np.all(np.isfinite(t)):
+        raise ValueError(f"angles must be a finite (N,) array, got shape {t.shape}")
+    c, s = np.cos(t), np.sin(t)
+    zero, one = np.zeros_like(t), np.ones_like(t)
+    return np.stack([np.stack([c, zero, s], -1), np.stack([zero, one, zero], -1), np.stack([-s, zero, c], -1)], -2)
+
+
 def random_rotation(seed: int) -> np.ndarray:
     """A rotation drawn uniformly from SO(3) (Haar measure) with a seeded generator."""
     rng = np.random.default_rng(seed)

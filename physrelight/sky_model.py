@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from physrelight import sh
+from physrelight import rotations, sh
 from physrelight._checks import Array
 
 __all__ = ["ANGSTROM_ALPHA", "ANGSTROM_BETA", "CLEAR_HORIZON", "CLEAR_ZENITH", "COMPONENTS", "FIT_GLOW_EXPONENT",
@@ -198,11 +198,7 @@ def _glow_sh(elevation_deg: np.ndarray, azimuth_deg: np.ndarray, exponent: float
     between the tabulated ones, turned exactly in azimuth."""
     elev, table = _glow_by_elevation(float(exponent))
     at0 = np.stack([np.interp(elevation_deg, elev, table[:, k]) for k in range(9)], -1)
-    t = np.radians(np.asarray(azimuth_deg, dtype=np.float64))
-    c, s_ = np.cos(t), np.sin(t)
-    zero, one = np.zeros_like(t), np.ones_like(t)
-    # rotations.about_y(a) for every azimuth at once (right-hand rule about +Y)
-    R = np.stack([np.stack([c, zero, s_], -1), np.stack([zero, one, zero], -1), np.stack([-s_, zero, c], -1)], -2)
+    R = rotations.about_y_many(np.atleast_1d(azimuth_deg))
     return np.asarray(sh.rotate(np.repeat(at0[..., None], 3, -1), R))[..., 0]
 
 
@@ -316,7 +312,7 @@ def _fit_sky(key: bytes, glow_exponent: float) -> SkyFit:
     fe, fa = np.meshgrid(np.clip(e[i] + fine, 0.0, 90.0), a[i] + fine, indexing="ij")
     fe, fa = fe.ravel(), fa.ravel()
     j, w, _, r2 = solve(fe, fa)
-    s = _sun_direction(np.array(fe[j]), np.array(fa[j])) / 1.0
+    s = _sun_direction(np.array(fe[j]), np.array(fa[j]))
     s, w = s / np.linalg.norm(s), np.array(w)
     s.setflags(write=False)  # remembered by the cache: shared between callers
     w.setflags(write=False)

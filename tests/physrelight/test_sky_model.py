@@ -80,7 +80,6 @@ def test_04_the_suns_disc_is_where_the_sun_is_and_carries_its_irradiance() -> No
     # a narrow camera pointed at the sun: 0.02 deg pixels, the disc (radius 0.27 deg) well resolved
     n = 64
     K = panorama.view_intrinsics(1.28, n, n)
-    T = panorama.level_camera(0.0, 30.0)
     yaw = math.degrees(math.atan2(fit.sun_direction[0], -fit.sun_direction[2]))
     T = panorama.level_camera(yaw, math.degrees(math.asin(fit.sun_direction[1])))
     rays = panorama.camera_rays(K, T, n, n, 1)
@@ -169,3 +168,14 @@ def test_09_any_order_2_lighting_gets_a_valid_sky() -> None:
         assert np.isfinite(fit.weights).all() and (fit.weights >= 0).all()
         assert fit.sun_direction[1] >= -1e-12 and 0.0 <= fit.relative_residual <= 1.0 + 1e-9
         assert torch.isfinite(sm.sky_view(fit, rays)).all()
+
+
+def test_10_the_batched_turn_about_y_is_about_y() -> None:
+    from physrelight import rotations
+
+    angles = np.array([-170.0, -33.3, 0.0, 12.5, 90.0, 271.0])
+    got = rotations.about_y_many(angles)
+    assert got.shape == (6, 3, 3)
+    assert np.allclose(got, np.stack([rotations.about_y(a) for a in angles]), atol=1e-15)
+    with pytest.raises(ValueError, match="angles"):
+        rotations.about_y_many(np.array([np.nan]))
