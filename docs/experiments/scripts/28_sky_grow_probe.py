@@ -17,13 +17,11 @@ import argparse
 import json
 import time
 
-import numpy as np
 import torch
 
 from learned import Relighter
 from learned import sky_segmentation as ss
-from physrelight import metrics
-from synth.panorama_crops import make_crops, shipped_panoramas
+from real_crop_scores import crop_panoramas, score_sky_masks, setting_summary
 
 
 def main() -> None:
@@ -35,8 +33,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(2)
     model = Relighter.load().sky_segmenter
-    group = "heldout" if args.heldout else "training"
-    panos = [p for p in shipped_panoramas() if p.group == group]
+    group, panos = crop_panoramas(args.heldout)
     if args.round == 1:
         default = [f"{r}:2:0" for r in ("0", "0.05", "0.1", "0.2", "1.0")]
     elif args.round == 2:
@@ -44,35 +41,23 @@ def main() -> None:
     else:
         default = ["0:2:1"] + [f"{r}:2:1:{s}" for r in ("0.05", "0.1", "0.2") for s in ("0.05", "0.1", "0.2")]
     grid = [g if ":" in g else f"{g}:2:1" for g in args.only] or default
-    rows = {g: {"iou": [], "f": [], "no_sky_called": [], "refused_with_sky": 0} for g in grid}
+
+    def masks_of(lin: torch.Tensor) -> dict[str, tuple[torch.Tensor, str]]:
+        base, why = ss.sky_mask_full_resolution(model, lin, grow=0.0)
+        out = {}
+        for g in grid:
+            reach, order, clamp, *spread = g.split(":")
+            # growth is the mask's last step, so it is applied here to the shipped mask
+            r_px = int(round(float(reach) * min(lin.shape[-2:])))
+            out[g] = (ss.grow_sky_by_colour(base, lin, r_px, order=int(order), clamp=bool(int(clamp)),
+                                            max_spread=float(spread[0]) if spread else None), why[0])
+        return out
+
     t0 = time.time()
-    for pano in panos:
-        for c in make_crops(pano, 16, 0, fov_range=(45.0, 75.0), samples=4):
-            lin = c.linear()
-            has_sky = c.sky.mean() >= 0.01
-            base, why = ss.sky_mask_full_resolution(model, lin, grow=0.0)
-            for g in grid:
-                reach, order, clamp, *spread = g.split(":")
-                # growth is the mask's last step, so it is applied here to the shipped mask
-                r_px = int(round(float(reach) * min(lin.shape[-2:])))
-                sky = ss.grow_sky_by_colour(base, lin, r_px, order=int(order), clamp=bool(int(clamp)),
-                                            max_spread=float(spread[0]) if spread else None)
-                m = sky[0, 0].numpy()
-                row = rows[g]
-                if has_sky:
-                    row["iou"].append(metrics.mask_iou(m, c.sky))
-                    row["f"].append(metrics.boundary_f(m, c.sky, 2.0))
-                    row["refused_with_sky"] += bool(why[0])
-                else:
-                    row["no_sky_called"].append(float(m.mean()))
-        print(f"{pano.name}: {time.time() - t0:.0f} s", flush=True)
+    rows = score_sky_masks(panos, grid, masks_of)
     out = {"group": group, "panoramas": [p.name for p in panos], "seconds": round(time.time() - t0, 1), "settings": {}}
     for k, row in rows.items():
-        out["settings"][k] = {"iou": float(np.mean(row["iou"])), "boundary_f": float(np.mean(row["f"])),
-                              "no_sky_called": float(np.mean(row["no_sky_called"])) if row["no_sky_called"] else None,
-                              "refused_with_sky": row["refused_with_sky"], "crops_with_sky": len(row["iou"]),
-                              "iou_per_crop": [round(v, 4) for v in row["iou"]]}
-        s = out["settings"][k]
+        out["settings"][k] = s = {**setting_summary(row), "iou_per_crop": [round(v, 4) for v in row["iou"]]}
         print(f"reach:order:clamp {k:>10}: IoU {s['iou']:.4f}  F {s['boundary_f']:.4f}  no-sky called {s['no_sky_called']}  "
               f"refused {s['refused_with_sky']}/{s['crops_with_sky']}")
     with open(args.out, "w") as f:

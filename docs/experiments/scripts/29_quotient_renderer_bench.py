@@ -25,7 +25,7 @@ from physrelight.stats import paired_bootstrap
 from validation.bench.data import load_dataset
 from validation.bench.methods import build_methods
 from validation.bench.protocols import cross_pairs
-from validation.bench.scores import score
+from real_crop_scores import bench_l1
 
 
 def main() -> None:
@@ -74,16 +74,7 @@ def main() -> None:
         methods = {"proposed": ms["proposed"], "quotient": ms["quotient"], "proposed_ratio": ratio(ms["proposed"])}
     else:
         methods = {"proposed": ms["proposed"], "quotient": ms["quotient"], "proposed_sun": proposed_sun}
-    l1 = {}
-    with torch.no_grad():
-        for name, fn in methods.items():
-            preds, T, M = [], [], []
-            for p in pairs:
-                fg, tgt = p.foreground(), p.target_display()
-                preds.append(torch.where(fg, p.display(fn(p)), tgt))
-                T.append(tgt)
-                M.append(fg)
-            l1[name] = score(preds, T, M, which=("l1",))["l1"]
+    l1 = bench_l1(methods, pairs)
     groups = np.asarray([p.view.scene for p in pairs])
     out = {"data": args.data, "renderer": args.renderer, "pairs": len(pairs),
            "l1": {k: float(v.mean()) for k, v in l1.items()}}

@@ -18,7 +18,7 @@ from physrelight.stats import paired_bootstrap
 from synth.dataset import SynthDataset
 from validation.bench.data import load_dataset
 from validation.bench.protocols import cross_pairs
-from validation.bench.scores import score
+from real_crop_scores import bench_l1
 
 
 def main() -> None:
@@ -54,17 +54,8 @@ def main() -> None:
 
     methods = {"sh_only": lambda p: relight(p, None), "fitted_sun": lambda p: relight(p, fitted(p)),
                "true_sun": lambda p: relight(p, p.sun_lighting(p.target))}
-    l1 = {}
-    with torch.no_grad():
-        for name, fn in methods.items():
-            preds, T, M = [], [], []
-            for p in pairs:
-                fg, tgt = p.foreground(), p.target_display()
-                preds.append(torch.where(fg, p.display(fn(p)), tgt))
-                T.append(tgt)
-                M.append(fg)
-            l1[name] = score(preds, T, M, which=("l1",))["l1"]
-            print(f"{name}: {float(l1[name].mean()):.5f} ({time.time() - t0:.0f} s)", flush=True)
+    l1 = bench_l1(methods, pairs, progress=lambda name, v: print(f"{name}: {float(v.mean()):.5f} "
+                                                                f"({time.time() - t0:.0f} s)", flush=True))
     groups = np.asarray([p.view.scene for p in pairs])
     out = {"data": args.data, "pairs": len(pairs), "l1": {k: float(v.mean()) for k, v in l1.items()},
            "fitted_sun_minus_sh_only": paired_bootstrap(l1["fitted_sun"], l1["sh_only"], groups=groups, seed=0)._asdict(),

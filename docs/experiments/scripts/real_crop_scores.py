@@ -1,0 +1,83 @@
+"""What the sky-mask probes (studies 26, 28, 30) and the bench-pair probes (studies 29, 33) share.
+
+Sky masks: every ``bench --real --full`` crop (seed 0, 16 per panorama, fov 45-75 deg, 4 samples) of the
+training panoramas or of the held-out one, each mask setting scored against the true sky: IoU and boundary
+F (2 px) over the crops with sky, the fraction called sky on those without, the crops with sky refused.
+
+Bench pairs: foreground l1 of several methods on the bench's cross-relighting pairs.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import torch
+
+from physrelight import metrics
+
+
+def crop_panoramas(heldout: bool) -> tuple[str, list[Any]]:
+    """``("heldout", [sunrise])`` or ``("training", [city, courtyard, forest])``."""
+    from synth.panorama_crops import shipped_panoramas
+
+    group = "heldout" if heldout else "training"
+    return group, [p for p in shipped_panoramas() if p.group == group]
+
+
+def score_sky_masks(panos: Sequence[Any], grid: Sequence[str],
+                    masks_of: Callable[[torch.Tensor], dict[str, tuple[torch.Tensor, str]]]) -> dict[str, dict[str, Any]]:
+    """Per setting of ``grid``, the lists ``iou``, ``f``, ``no_sky_called`` and the count ``refused_with_sky``.
+
+    ``masks_of(linear photo (1, 3, H, W))`` gives every setting's ``(sky (1, 1, H, W) bool, reason)`` for one
+    crop (so a probe can share work between settings)."""
+    from synth.panorama_crops import make_crops
+
+    rows = {g: {"iou": [], "f": [], "no_sky_called": [], "refused_with_sky": 0} for g in grid}
+    t0 = time.time()
+    for pano in panos:
+        for c in make_crops(pano, 16, 0, fov_range=(45.0, 75.0), samples=4):
+            lin = c.linear()
+            has_sky = c.sky.mean() >= 0.01
+            masks = masks_of(lin)
+            for g in grid:
+                sky, why = masks[g]
+                m = sky[0, 0].numpy()
+                row = rows[g]
+                if has_sky:
+                    row["iou"].append(metrics.mask_iou(m, c.sky))
+                    row["f"].append(metrics.boundary_f(m, c.sky, 2.0))
+                    row["refused_with_sky"] += bool(why)
+                else:
+                    row["no_sky_called"].append(float(m.mean()))
+        print(f"{pano.name}: {time.time() - t0:.0f} s", flush=True)
+    return rows
+
+
+def setting_summary(row: dict[str, Any]) -> dict[str, Any]:
+    """The means and counts of one setting's :func:`score_sky_masks` row."""
+    return {"iou": float(np.mean(row["iou"])), "boundary_f": float(np.mean(row["f"])),
+            "no_sky_called": float(np.mean(row["no_sky_called"])) if row["no_sky_called"] else None,
+            "refused_with_sky": row["refused_with_sky"], "crops_with_sky": len(row["iou"])}
+
+
+def bench_l1(methods: dict[str, Callable[[Any], torch.Tensor]], pairs: Sequence[Any],
+             progress: Callable[[str, torch.Tensor], None] | None = None) -> dict[str, torch.Tensor]:
+    """Per method (``pair -> relit linear (1, 3, H, W)``), the ``(len(pairs),)`` foreground l1 against the
+    path-traced target, the bench's way (:func:`validation.bench.scores.score`)."""
+    from validation.bench.scores import score
+
+    l1 = {}
+    with torch.no_grad():
+        for name, fn in methods.items():
+            preds, T, M = [], [], []
+            for p in pairs:
+                fg, tgt = p.foreground(), p.target_display()
+                preds.append(torch.where(fg, p.display(fn(p)), tgt))
+                T.append(tgt)
+                M.append(fg)
+            l1[name] = score(preds, T, M, which=("l1",))["l1"]
+            if progress is not None:
+                progress(name, l1[name])
+    return l1
