@@ -32,26 +32,12 @@ __all__ = ["checkpoint_at", "checkpoints_between", "export_weights", "latest_che
 _NAME = re.compile(r"^step_(\d{7})\.json$")
 
 
-def _canonical_header(data: bytes) -> bytes:
-    """A safetensors file with its JSON header's keys sorted.
-
-    safetensors writes the metadata from a hash map, so two exports of the same checkpoint
-    differed in the header's key order (same tensors, different bytes). Sorting the keys
-    makes a file a function of its content; the format is unchanged (an 8-byte little-endian
-    header length, the JSON header padded with spaces to a multiple of 8, the data).
-    """
-    n = int.from_bytes(data[:8], "little")
-    header = json.dumps(json.loads(data[8:8 + n]), sort_keys=True, separators=(",", ":")).encode()
-    header += b" " * (-(8 + len(header)) % 8)
-    return len(header).to_bytes(8, "little") + header + data[8 + n:]
-
-
 def _atomic_save_tensors(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[str, str] | None = None) -> None:
     """Write ``tensors`` (and string ``metadata``) as safetensors, atomically, byte-reproducibly, with the
     mode an ordinary ``open()`` gives (safetensors' own writer leaves 0600)."""
     data = serialize_tensors({k: v.detach().contiguous().cpu() for k, v in tensors.items()}, metadata=metadata)
     with io.atomic_path(path, ".safetensors") as tmp:
-        tmp.write_bytes(_canonical_header(data))
+        tmp.write_bytes(io.canonical_safetensors(data))
 
 
 def _atomic_write_json(data: Any, path: Path) -> None:

@@ -769,10 +769,12 @@ def _sun_rgb(direction: np.ndarray) -> np.ndarray:
 def sun_sky_map(sky: str = "clear", direction: Any = (0.0, 1.0, 0.0), height: int = 64) -> np.ndarray:
     """``(height, 2 height, 3)`` the sky of :func:`sun_lighting` without its sun, world frame.
 
-    ``"clear"``: a clear sky, deep blue (0.30, 0.50, 1.0) at the zenith turning pale
-    (0.80, 0.88, 1.0) and twice as bright towards the horizon, with a glow of the sun's colour round
-    it (``2 max(0, d . s)^32``), scaled so its order-2 irradiance on a horizontal surface is 0.3
-    (green) against the sun's luminance 1. ``"overcast"``: the grey CIE overcast sky
+    ``"clear"``: a clear day's sky for the sun towards ``direction``,
+    :func:`physrelight.sky_model.sunsky_radiance` (Mitsuba 3's Hosek-Wilkie sky, turbidity 3, tabulated),
+    in units where the sun's irradiance on a surface facing it has luminance 1: its level against the sun
+    is the model's (order-2 irradiance on a horizontal surface 0.27 of the sun's at 5 degrees up,
+    0.18-0.19 from 20 degrees up), its colour and gradient too (a deep blue zenith, a pale horizon, warm
+    under a low sun, the aureole round the sun). ``"overcast"``: the grey CIE overcast sky
     ``L(theta) = L_z (1 + 2 cos theta) / 3``, scaled to order-2 irradiance 1 on a horizontal
     surface; ``direction`` is ignored. Both are dark below the horizon.
     """
@@ -780,18 +782,14 @@ def sun_sky_map(sky: str = "clear", direction: Any = (0.0, 1.0, 0.0), height: in
         raise ValueError(f"sky must be one of {SKY_TYPES}, got {sky!r}")
     from physrelight import envmap
 
-    from physrelight.sky_model import clear_sky, overcast_sky, sun_glow
+    from physrelight.sky_model import overcast_sky, sunsky_radiance
 
-    up = np.array([[0.0, 1.0, 0.0]])
     d = envmap.directions(height, 2 * height)
     if sky == "overcast":
+        up = np.array([[0.0, 1.0, 0.0]])
         env = np.repeat(overcast_sky(d)[..., None], 3, axis=-1)
         return env / float(sh.irradiance(sh.project_envmap(env, order=2), up)[0, 1])
-    s = _sun_direction(direction)
-    # the glow round the sun is forward-scattered sunlight: it takes the sun's colour
-    env = clear_sky(d) + sun_glow(d, s)[..., None] * _sun_rgb(s)
-    # Scale so the order-2 irradiance the image model sees on a horizontal surface is 0.3 in green.
-    return env * (0.3 / float(sh.irradiance(sh.project_envmap(env, order=2), up)[0, 1]))
+    return sunsky_radiance(d, _sun_direction(direction))
 
 
 def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
@@ -800,7 +798,7 @@ def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
     ``"clear"``: a delta sun towards ``direction`` of luminance 1 on a surface facing it, white at the
     zenith and warmer as it sinks (its light crosses more air: :func:`physrelight.sky_model.sun_colour`,
     a clear atmosphere's Rayleigh and aerosol extinction), plus the clear sky of :func:`sun_sky_map`
-    (0.3 of order-2 irradiance on a horizontal surface: soft fill light).
+    (Hosek-Wilkie's, at its level against the sun: the fill light).
     ``"overcast"``: the CIE overcast sky of :func:`sun_sky_map`, no sun; the direction is
     ignored. Skies are projected from a 64 x 128 map.
     """
@@ -860,7 +858,7 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
 
     An env map is looked up through the pinhole camera (``K``, ``world_to_camera``) by
     :func:`physrelight.panorama.view` (one ray per pixel: a photo's pixel is finer than a map's
-    texel); a sun target is :func:`sun_sky_map` plus the sun's disc (radius
+    texel); a sun target is :func:`sun_sky_map`'s sky along each ray plus the sun's disc (radius
     :data:`physrelight.sky_model.SUN_RADIUS_DEG`, luminance 1, the sun's colour). ``azimuth_deg`` turns the target about +Y as
     :func:`rotate_azimuth` does (the camera is turned the other way).
 
@@ -876,13 +874,15 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     if kind == "env":
         env = envmap.read(target) if isinstance(target, (str, os.PathLike)) else np.asarray(target)
         return torch.as_tensor(panorama.view(torch.as_tensor(env, dtype=torch.float32), K, R, height, width, 1))
-    env = torch.as_tensor(sun_sky_map(sky, target), dtype=torch.float32)
     rays = horizon_clamped(panorama.camera_rays(K, R, height, width, 1))
-    out = panorama.look_up(env, rays)
-    if sky == "clear":
-        d = _sun_direction(target)
-        out = out + (sun_disc(rays[..., 0, :], d)[..., None] * torch.from_numpy(_sun_rgb(d))).to(out.dtype)
-    return out
+    if sky == "overcast":
+        return panorama.look_up(torch.as_tensor(sun_sky_map(sky, target), dtype=torch.float32), rays)
+    # the clear sky along each ray itself (not through a lat-long map): smooth at any resolution
+    from physrelight.sky_model import sunsky_radiance
+
+    d = _sun_direction(target)
+    out = torch.from_numpy(sunsky_radiance(rays[..., 0, :].double().numpy(), d)).float()
+    return out + (sun_disc(rays[..., 0, :], d)[..., None] * torch.from_numpy(_sun_rgb(d))).to(out.dtype)
 
 
 def _turned_camera(world_to_camera: Any, azimuth_deg: float) -> np.ndarray:

@@ -33,6 +33,20 @@ def _read_umask() -> int:
 _UMASK = _read_umask()
 
 
+def canonical_safetensors(data: bytes) -> bytes:
+    """The safetensors file ``data`` with its JSON header's keys sorted.
+
+    safetensors writes the metadata from a hash map, so two writes of the same tensors differed in the
+    header's key order (same content, different bytes). Sorting the keys makes a file a function of its
+    content; the format is unchanged (an 8-byte little-endian header length, the JSON header padded with
+    spaces to a multiple of 8, the data).
+    """
+    n = int.from_bytes(data[:8], "little")
+    header = json.dumps(json.loads(data[8:8 + n]), sort_keys=True, separators=(",", ":")).encode()
+    header += b" " * (-(8 + len(header)) % 8)
+    return len(header).to_bytes(8, "little") + header + data[8 + n:]
+
+
 @contextmanager
 def atomic_path(path: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` if the block succeeds."""

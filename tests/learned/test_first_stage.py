@@ -222,13 +222,14 @@ def test_08_exported_weights_load_offline_and_relight(tiny_dataset: Path, tiny_p
 
     e_up = sh.irradiance(sun.numpy(), np.array([[0.0, 1.0, 0.0]]))[0]
     # the order-2 sun at its own direction (1/4 + 1/2 + 5/16 = 1.0625 in every channel, the clamped
-    # cosine's truncation) + the clear fill sky (0.3 in green, bluer than it is red)
+    # cosine's truncation) + the clear fill sky (Hosek-Wilkie's with the sun overhead: 0.21 of the sun's
+    # irradiance in green, bluer than it is red; checked against Mitsuba in tests/synth/test_sunsky_table.py)
     from learned.relighter import sun_sky_map
 
     sky_up = sh.irradiance(sh.project_envmap(sun_sky_map("clear", [0.0, 1.0, 0.0]), order=2),
                            np.array([[0.0, 1.0, 0.0]]))[0]
     np.testing.assert_allclose(e_up - sky_up, 1.0625, rtol=1e-6)
-    assert abs(sky_up[1] - 0.3) < 1e-9 and sky_up[2] > sky_up[1] > sky_up[0]
+    assert 0.18 < sky_up[1] < 0.25 and sky_up[2] > sky_up[1] > sky_up[0]
     with pytest.raises(ValueError, match="target"):
         r.relight(photo, np.zeros((4, 3)))
     with pytest.raises(ValueError, match=r"\[0, 1\]"):

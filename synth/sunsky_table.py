@@ -1,0 +1,101 @@
+"""The clear sky of a ``--sun`` target, tabulated from Mitsuba 3's Hosek-Wilkie ``sunsky``.
+
+``physrelight`` may not import Mitsuba (DESIGN.md), so the sky a sun target brings is shipped as a
+small table that this module writes (``physrelight/data/sunsky_table.safetensors``) and
+:func:`physrelight.sky_model.sunsky_radiance` reads. The table holds, for each sun elevation of
+:data:`ELEVATIONS_DEG`, the sky's linear-sRGB radiance (no sun) on a grid of view elevation
+(:data:`VIEW_ROWS` rows, 0 to 90 degrees above the horizon) by azimuth from the sun
+(:data:`AZIMUTH_COLS` columns, 0 to 180 degrees; the sky is mirror-symmetric about the sun's vertical
+plane), divided by the luminance of the same model's sun irradiance on a surface facing it. So a sun of
+luminance 1 and this sky keep Mitsuba's sky-to-sun ratio, which changes with the sun's elevation
+(horizontal sky irradiance 0.27 of the sun's at 5 degrees up, 0.18-0.19 from 20 degrees up, turbidity 3).
+
+Turbidity :data:`TURBIDITY` and ground albedo :data:`GROUND_ALBEDO` are the middles of the synthetic
+data's ranges (:data:`synth.lighting.TURBIDITY_RANGE` 2-6, :data:`synth.lighting.GROUND_ALBEDO_RANGE`
+0.1-0.4); the rounded 3 rather than 4 for a clear day.
+
+Regenerate (deterministic, ~10 s)::
+
+    .venv/bin/python -m synth.sunsky_table -o physrelight/data/sunsky_table.safetensors
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+import numpy as np
+
+from physrelight import colour
+from physrelight.io import atomic_path, canonical_safetensors
+
+__all__ = ["AZIMUTH_COLS", "ELEVATIONS_DEG", "GROUND_ALBEDO", "TURBIDITY", "VIEW_ROWS", "main", "table_directions",
+           "sunsky_table"]
+
+ELEVATIONS_DEG = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 15.0, 18.0, 22.0, 26.0, 30.0, 35.0, 40.0, 45.0,
+                  50.0, 60.0, 70.0, 80.0, 90.0)
+"""Sun elevations of the table (degrees): dense near the horizon, where the sky changes fastest. From 2 degrees:
+below it Mitsuba's sun keeps its 2-degree irradiance (its solar data stop there) while its sky dims, so the
+ratio of the two would rise towards the horizon (0.37 at 0.5 degree, 0.57 at 2, against 0.40 at 3)."""
+VIEW_ROWS = 31
+"""View elevations ``linspace(0, 90, VIEW_ROWS)`` (3 degrees apart)."""
+AZIMUTH_COLS = 61
+"""Azimuths from the sun ``linspace(0, 180, AZIMUTH_COLS)`` (3 degrees apart)."""
+TURBIDITY = 3.0
+GROUND_ALBEDO = 0.2
+
+
+def table_directions(elevation_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(VIEW_ROWS, AZIMUTH_COLS, 3)`` world view directions of the table's nodes and the ``(3,)`` sun
+    direction, for a sun at ``elevation_deg`` and azimuth 0 (:func:`synth.lighting.direction_from_angles`)."""
+    from synth.lighting import direction_from_angles
+
+    beta = np.radians(np.linspace(0.0, 90.0, VIEW_ROWS))[:, None]
+    phi = np.radians(np.linspace(0.0, 180.0, AZIMUTH_COLS))[None, :]
+    d = np.stack(np.broadcast_arrays(np.cos(beta) * np.sin(phi), np.sin(beta), -np.cos(beta) * np.cos(phi)), -1)
+    return d, direction_from_angles(elevation_deg, 0.0)
+
+
+def sunsky_table(elevations_deg: tuple[float, ...] = ELEVATIONS_DEG, turbidity: float = TURBIDITY,
+                 albedo: float = GROUND_ALBEDO) -> np.ndarray:
+    """``(len(elevations_deg), VIEW_ROWS, AZIMUTH_COLS, 3)`` float64: Mitsuba's ``sunsky`` sky radiance at the
+    table's nodes over the luminance of its sun's irradiance on a surface facing the sun."""
+    from synth.lighting import _mitsuba, _sun_disk_irradiance, _sunsky_dict, eval_emitter
+
+    mi = _mitsuba()
+    lum = np.asarray(colour.LUMINANCE, dtype=np.float64)
+    out = np.empty((len(elevations_deg), VIEW_ROWS, AZIMUTH_COLS, 3))
+    for i, e in enumerate(elevations_deg):
+        if not 0.0 < e <= 90.0:
+            raise ValueError(f"sun elevations must lie in (0, 90] degrees, got {e}")
+        d, s = table_directions(e)
+        sky = mi.load_dict(_sunsky_dict(mi, s, turbidity, albedo, sky_scale=1.0, sun_scale=0.0))
+        sun = mi.load_dict(_sunsky_dict(mi, s, turbidity, albedo, sky_scale=0.0, sun_scale=1.0))
+        e_sun = float(np.clip(_sun_disk_irradiance(mi, sun, s), 0.0, None) @ lum)
+        radiance = np.clip(eval_emitter(mi, sky, d.reshape(-1, 3)), 0.0, None).reshape(VIEW_ROWS, AZIMUTH_COLS, 3)
+        out[i] = radiance / e_sun
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m synth.sunsky_table", description=__doc__.split("\n\n")[0])
+    p.add_argument("-o", "--out", required=True, help="the .safetensors file to write (atomically)")
+    args = p.parse_args(argv)
+    table = sunsky_table()
+    from safetensors.numpy import save
+
+    tensors = {"radiance": table.astype(np.float16), "elevations_deg": np.array(ELEVATIONS_DEG),
+               "view_elevations_deg": np.linspace(0.0, 90.0, VIEW_ROWS),
+               "azimuths_deg": np.linspace(0.0, 180.0, AZIMUTH_COLS)}
+    meta = {"model": "Mitsuba 3 sunsky (Hosek-Wilkie), sky only, over its sun's irradiance luminance",
+            "turbidity": repr(TURBIDITY), "ground_albedo": repr(GROUND_ALBEDO), "written_by": "synth.sunsky_table"}
+    with atomic_path(args.out) as tmp:
+        tmp.write_bytes(canonical_safetensors(save(tensors, metadata=meta)))
+    print(f"wrote {args.out}: {table.shape[0]} sun elevations ({ELEVATIONS_DEG[0]:g}-{ELEVATIONS_DEG[-1]:g} deg) x "
+          f"{VIEW_ROWS} view elevations x {AZIMUTH_COLS} azimuths", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
