@@ -13,6 +13,8 @@ The target lighting is given in the world frame (Y up); the camera is level and 
 world -Z: ``--azimuth`` turns the target about the vertical axis, ``--sun ELEV AZIM`` puts the
 sun ELEV degrees above the horizon and AZIM degrees clockwise (seen from above) from straight
 ahead of the camera (0 = the sun behind the scene, facing the camera; 180 = behind the camera).
+A clear sky (``--sky clear``, the default) is Mitsuba 3's Hosek-Wilkie sky for that sun (tabulated, turbidity
+3; a sun under 2 degrees gets the sky of 2 degrees) and needs ELEV > 0; ``--sky overcast`` has no sun.
 The camera's horizontal field of view comes from the photo's EXIF focal length, else ``--fov``
 (default 60); its pitch from ``--pitch``, else from where the sky comes down to (the horizon).
 
@@ -147,6 +149,9 @@ def _relight(args: argparse.Namespace) -> int:
         raise ValueError(f"output must be a {want} file{' with --sequence' if args.sequence else ''}, got {str(out)!r}")
     if args.sky is not None and args.sun is None:
         raise ValueError("--sky chooses the sky of a --sun target; an --env or --sh target brings its own")
+    if args.sun is not None and (args.sky or "clear") == "clear" and not args.sun[0] > 0:
+        raise ValueError(f"--sun {args.sun[0]:g} {args.sun[1]:g}: a clear sky's sun must be above the horizon "
+                         f"(ELEV > 0); --sky overcast gives a sunless sky")
     if args.source_env is not None or args.source_sh is not None:
         # The known-source track: the quotient divides by the given lighting (bench: quotient_known, and
         # proposed_known for the shipped renderer on top of it, study 29); resynthesis methods cannot use it.
@@ -230,7 +235,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     tgt.add_argument("--env", help="target environment map (lat-long .exr or .hdr, world frame, Y up)")
     tgt.add_argument("--sh", help="target order-2 radiance SH, world frame: .npy, .json or text, shape (9, 3)")
     tgt.add_argument("--sun", nargs=2, type=float, metavar=("ELEV", "AZIM"),
-                     help="target sun elevation and azimuth in degrees (see above), with --sky")
+                     help="target sun elevation (> 0 for a clear sky) and azimuth in degrees (see above), with --sky")
     p.add_argument("--sky", choices=SKY_TYPES, default=None, help="sky type for --sun (default: clear)")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--source-env", default=None, metavar="MAP",

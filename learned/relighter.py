@@ -758,6 +758,16 @@ def _sun_direction(direction: Any) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
+def _clear_sky_sun(direction: Any) -> np.ndarray:
+    """:func:`_sun_direction`, above the horizon: a clear day's sun below it lights nothing directly and its
+    twilight sky is not modelled (Hosek-Wilkie's sky starts at 2 degrees up), so it is refused."""
+    d = _sun_direction(direction)
+    if not d[1] > 0:
+        raise ValueError(f"a clear sky's sun must be above the horizon (elevation > 0), got "
+                         f"{math.degrees(math.asin(float(np.clip(d[1], -1, 1)))):.3g} deg; use sky 'overcast' for a sunless sky")
+    return d
+
+
 def _sun_rgb(direction: np.ndarray) -> np.ndarray:
     """``(3,)`` the colour of a sun towards unit ``direction`` (luminance 1, white at the zenith):
     :func:`physrelight.sky_model.sun_colour` at its elevation."""
@@ -789,7 +799,7 @@ def sun_sky_map(sky: str = "clear", direction: Any = (0.0, 1.0, 0.0), height: in
         up = np.array([[0.0, 1.0, 0.0]])
         env = np.repeat(overcast_sky(d)[..., None], 3, axis=-1)
         return env / float(sh.irradiance(sh.project_envmap(env, order=2), up)[0, 1])
-    return sunsky_radiance(d, _sun_direction(direction))
+    return sunsky_radiance(d, _clear_sky_sun(direction))
 
 
 def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
@@ -802,7 +812,7 @@ def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
     ``"overcast"``: the CIE overcast sky of :func:`sun_sky_map`, no sun; the direction is
     ignored. Skies are projected from a 64 x 128 map.
     """
-    d = _sun_direction(direction)
+    d = _sun_direction(direction) if sky == "overcast" else _clear_sky_sun(direction)
     coeffs = np.asarray(sh.project_envmap(sun_sky_map(sky, d), order=2))
     if sky == "overcast":
         return coeffs
@@ -880,7 +890,7 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     # the clear sky along each ray itself (not through a lat-long map): smooth at any resolution
     from physrelight.sky_model import sunsky_radiance
 
-    d = _sun_direction(target)
+    d = _clear_sky_sun(target)
     out = torch.from_numpy(sunsky_radiance(rays[..., 0, :].double().numpy(), d)).float()
     return out + (sun_disc(rays[..., 0, :], d)[..., None] * torch.from_numpy(_sun_rgb(d))).to(out.dtype)
 

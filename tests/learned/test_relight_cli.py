@@ -101,6 +101,8 @@ def test_03_sequence_writes_an_animated_gif_that_changes(photo: Path, tmp_path: 
     ("ok", ["--sh", "TMPDIR"], "is not a regular file"),
     ("ok", ["--env", "TMPDIR"], "is not a regular file"),
     ("ok", ["--sun", "120", "0"], "elevation"),
+    ("ok", ["--sun", "-5", "0"], "above the horizon"),
+    ("ok", ["--sun", "0", "90", "--sky", "clear"], "above the horizon"),
     ("ok", ["--sun", "20", "0", "--mask", "SMALLMASK"], "mask"),
     ("ok", ["--sun", "20", "0", "--sequence", "2"], r"\.gif"),
 ])
