@@ -782,8 +782,8 @@ def sun_sky_map(sky: str = "clear", direction: Any = (0.0, 1.0, 0.0), height: in
     ``"clear"``: a clear day's sky for the sun towards ``direction``,
     :func:`physrelight.sky_model.sunsky_radiance` (Mitsuba 3's Hosek-Wilkie sky, turbidity 3, tabulated),
     in units where the sun's irradiance on a surface facing it has luminance 1: its level against the sun
-    is the model's (order-2 irradiance on a horizontal surface 0.27 of the sun's at 5 degrees up,
-    0.18-0.19 from 20 degrees up), its colour and gradient too (a deep blue zenith, a pale horizon, warm
+    is the model's (order-2 irradiance on a horizontal surface 0.29 of the sun's at 5 degrees up,
+    0.19-0.22 from 15 degrees up, in luminance), its colour and gradient too (a deep blue zenith, a pale horizon, warm
     under a low sun, the aureole round the sun). ``"overcast"``: the grey CIE overcast sky
     ``L(theta) = L_z (1 + 2 cos theta) / 3``, scaled to order-2 irradiance 1 on a horizontal
     surface; ``direction`` is ignored. Both are dark below the horizon.

@@ -114,7 +114,8 @@ def sunsky_radiance(d: np.ndarray, s: Array) -> np.ndarray:
     linear in the sun's elevation between the table's (2-90 degrees; a sun lower than 2 degrees gets the
     sky of 2 degrees, where Mitsuba's solar data stop). So the sky keeps the model's shape (a dark zenith, a horizon 5-8 times brighter,
     the aureole, a warm horizon under a low sun) and its level against the sun (horizontal irradiance
-    0.27 of the sun's at 5 degrees up, 0.18-0.19 from 20 degrees). 0 below the horizon.
+    0.29 of the sun's at 5 degrees up, 0.19-0.22 from 15 degrees, in luminance), white-balanced to the zenith sun as
+    :func:`sun_colour` is. 0 below the horizon.
     """
     d = np.asarray(d, dtype=np.float64)
     s = np.asarray(s, dtype=np.float64)
