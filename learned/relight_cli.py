@@ -56,8 +56,9 @@ def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
     """
     if not (math.isfinite(elevation_deg) and math.isfinite(azimuth_deg)) or not -90 <= elevation_deg <= 90:
         raise ValueError(f"sun elevation must lie in [-90, 90] degrees, got {elevation_deg}")
-    e, a = math.radians(elevation_deg), math.radians(azimuth_deg)
-    return np.array([math.sin(a) * math.cos(e), math.sin(e), -math.cos(a) * math.cos(e)])
+    from physrelight.envmap import direction_from_angles
+
+    return direction_from_angles(elevation_deg, azimuth_deg)
 
 
 def _read_sh(path: str) -> np.ndarray:

@@ -111,6 +111,18 @@ def directions(height: int, width: int) -> np.ndarray:
     return _directions(height, width).copy()
 
 
+def direction_from_angles(elevation_deg: Array, azimuth_deg: Array) -> np.ndarray:
+    """``(..., 3)`` float64 unit world directions at ``elevation_deg`` above the horizon and ``azimuth_deg``
+    (broadcast together): azimuth 0 is world -Z (where a level camera looks, the map's ``u = 0``), 90 is +X,
+    so ``d = (cos e sin a, sin e, -cos e cos a)``. The one place the library turns angles into directions
+    (suns, sky tables, cameras' targets)."""
+    e = np.radians(np.asarray(elevation_deg, dtype=np.float64))
+    a = np.radians(np.asarray(azimuth_deg, dtype=np.float64))
+    if not (np.all(np.isfinite(e)) and np.all(np.isfinite(a))):
+        raise ValueError(f"elevation and azimuth must be finite degrees, got {elevation_deg!r}, {azimuth_deg!r}")
+    return np.stack(np.broadcast_arrays(np.cos(e) * np.sin(a), np.sin(e), -np.cos(e) * np.cos(a)), -1)
+
+
 @functools.lru_cache(maxsize=16)
 def _solid_angles(height: int, width: int) -> np.ndarray:
     # The solid angle a texel's value covers under bilinear interpolation: the integral

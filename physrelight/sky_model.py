@@ -212,9 +212,10 @@ def sun_colour(elevation_deg: float) -> np.ndarray:
 
 
 def _sun_direction(elevation_deg: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray:
-    """``(..., 3)``: azimuth 0 is world -Z (where a level camera looks), positive towards +X."""
-    e, a = np.radians(elevation_deg), np.radians(azimuth_deg)
-    return np.stack([np.cos(e) * np.sin(a), np.sin(e), -np.cos(e) * np.cos(a)], -1)
+    """``(..., 3)``: :func:`physrelight.envmap.direction_from_angles`."""
+    from physrelight.envmap import direction_from_angles
+
+    return direction_from_angles(elevation_deg, azimuth_deg)
 
 
 def _project(maps: np.ndarray) -> np.ndarray:

@@ -149,8 +149,7 @@ def direction_from_angles(elevation_deg: float, azimuth_deg: float) -> np.ndarra
     """``(3,)`` unit world direction for an elevation and azimuth in degrees (see module doc)."""
     _check_finite_number(elevation_deg, "elevation_deg")
     _check_finite_number(azimuth_deg, "azimuth_deg")
-    e, a = math.radians(elevation_deg), math.radians(azimuth_deg)
-    return np.array([math.cos(e) * math.sin(a), math.sin(e), -math.cos(e) * math.cos(a)])
+    return _envmap.direction_from_angles(float(elevation_deg), float(azimuth_deg))
 
 
 def angles_from_direction(direction: Sequence[float] | np.ndarray) -> tuple[float, float]:

@@ -52,12 +52,10 @@ GROUND_ALBEDO = 0.2
 
 def table_directions(elevation_deg: float) -> tuple[np.ndarray, np.ndarray]:
     """``(VIEW_ROWS, AZIMUTH_COLS, 3)`` world view directions of the table's nodes and the ``(3,)`` sun
-    direction, for a sun at ``elevation_deg`` and azimuth 0 (:func:`synth.lighting.direction_from_angles`)."""
-    from synth.lighting import direction_from_angles
+    direction, for a sun at ``elevation_deg`` and azimuth 0 (:func:`physrelight.envmap.direction_from_angles`)."""
+    from physrelight.envmap import direction_from_angles
 
-    beta = np.radians(np.linspace(0.0, 90.0, VIEW_ROWS))[:, None]
-    phi = np.radians(np.linspace(0.0, 180.0, AZIMUTH_COLS))[None, :]
-    d = np.stack(np.broadcast_arrays(np.cos(beta) * np.sin(phi), np.sin(beta), -np.cos(beta) * np.cos(phi)), -1)
+    d = direction_from_angles(np.linspace(0.0, 90.0, VIEW_ROWS)[:, None], np.linspace(0.0, 180.0, AZIMUTH_COLS)[None, :])
     return d, direction_from_angles(elevation_deg, 0.0)
 
 

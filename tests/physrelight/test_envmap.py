@@ -219,3 +219,18 @@ def test_13_radiance_hdr_reads_within_rgbe_quantisation(tmp_path, rle: bool) -> 
     path.write_bytes(b"P6 not a radiance file")
     with pytest.raises(ValueError, match="not a Radiance"):
         envmap.read(path)
+
+
+def test_14_angles_name_the_texels_of_the_maps_layout() -> None:
+    """``direction_from_angles`` is the layout's own parametrisation: the texel of row ``i`` (elevation
+    ``90 - 180 i / (H - 1)``) and column ``j`` (azimuth ``360 (j + 0.5) / W``) is its direction; azimuth 0 is -Z,
+    90 is +X; it broadcasts, and refuses what is not finite."""
+    h, w = 9, 18
+    i, j = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
+    got = envmap.direction_from_angles(90.0 - 180.0 * i / (h - 1), 360.0 * (j + 0.5) / w)
+    np.testing.assert_allclose(got, envmap.directions(h, w), atol=1e-12)
+    np.testing.assert_allclose(envmap.direction_from_angles(0.0, 0.0), [0, 0, -1], atol=1e-15)
+    np.testing.assert_allclose(envmap.direction_from_angles(0.0, 90.0), [1, 0, 0], atol=1e-15)
+    assert envmap.direction_from_angles(np.zeros((2, 1)), np.zeros(3)).shape == (2, 3, 3)
+    with pytest.raises(ValueError, match="finite"):
+        envmap.direction_from_angles(float("nan"), 0.0)
