@@ -19,6 +19,9 @@ hemisphere and refined to 0.25 degree. The parts' SH come from their lat-long ma
 fitted parts evaluated along each ray, so it is smooth at any resolution by construction: no
 blotch, no band. What order-2 SH cannot say (clouds, a treeline), the fit cannot either.
 
+The clear sky of a ``--sun`` target is not fitted but tabulated: :func:`sunsky_radiance`, Mitsuba 3's
+Hosek-Wilkie sky (:data:`SUNSKY_TABLE`, written by :mod:`synth.sunsky_table`).
+
 All directions are world frame, Y up (DESIGN.md); radiance in the coefficients' units.
 """
 
@@ -82,8 +85,8 @@ def overcast_sky(d: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- a clear day's sky
 
 SUNSKY_TABLE = Path(__file__).resolve().parent / "data" / "sunsky_table.safetensors"
-"""Mitsuba 3's Hosek-Wilkie clear sky (turbidity 3, ground albedo 0.2) over its sun's irradiance, tabulated
-by :mod:`synth.sunsky_table` (``physrelight`` may not import Mitsuba)."""
+"""Mitsuba 3's Hosek-Wilkie clear sky (turbidity 3, ground albedo 0.2) over its sun's irradiance, white-balanced
+to its zenith sun, tabulated by :mod:`synth.sunsky_table` (``physrelight`` may not import Mitsuba)."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -91,7 +94,10 @@ def _sunsky_table() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     from safetensors.numpy import load_file
 
     t = load_file(str(SUNSKY_TABLE))
-    return (t["radiance"].astype(np.float64), t["elevations_deg"], t["view_elevations_deg"], t["azimuths_deg"])
+    out = (t["radiance"].astype(np.float64), t["elevations_deg"], t["view_elevations_deg"], t["azimuths_deg"])
+    for a in out:  # shared by every call (cached): read-only
+        a.setflags(write=False)
+    return out
 
 
 def _bilinear(grid: np.ndarray, rows: np.ndarray, cols: np.ndarray, r: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -109,13 +115,13 @@ def sunsky_radiance(d: np.ndarray, s: Array) -> np.ndarray:
     """``(..., 3)`` a clear day's sky radiance (no sun) along unit directions ``d (..., 3)``, for a sun
     towards unit ``s (3,)``, in units where the sun's irradiance on a surface facing it has luminance 1.
 
-    Mitsuba 3's Hosek-Wilkie ``sunsky`` (turbidity 3, ground albedo 0.2; linear sRGB), looked up in
-    :data:`SUNSKY_TABLE`: bilinear in the view's elevation and its azimuth from the sun (3-degree nodes),
-    linear in the sun's elevation between the table's (2-90 degrees; a sun lower than 2 degrees gets the
-    sky of 2 degrees, where Mitsuba's solar data stop). So the sky keeps the model's shape (a dark zenith, a horizon 5-8 times brighter,
-    the aureole, a warm horizon under a low sun) and its level against the sun (horizontal irradiance
-    0.29 of the sun's at 5 degrees up, 0.19-0.22 from 15 degrees, in luminance), white-balanced to the zenith sun as
-    :func:`sun_colour` is. 0 below the horizon.
+    Mitsuba 3's Hosek-Wilkie ``sunsky`` (turbidity 3, ground albedo 0.2; linear sRGB white-balanced to the
+    zenith sun, as :func:`sun_colour` is), looked up in :data:`SUNSKY_TABLE`: bilinear in the view's elevation
+    and its azimuth from the sun (3-degree nodes), linear in the sun's elevation between the table's (2-90
+    degrees; a sun lower than 2 degrees gets the sky of 2 degrees, where Mitsuba's solar data stop). So the sky
+    keeps the model's shape (a dark zenith, a horizon 2-8 times brighter, the aureole, a warm horizon under a
+    low sun) and its level against the sun (horizontal irradiance 0.29 of the sun's at 5 degrees up,
+    0.19-0.22 from 15 degrees, in luminance). 0 below the horizon.
     """
     d = np.asarray(d, dtype=np.float64)
     s = np.asarray(s, dtype=np.float64)
