@@ -37,13 +37,13 @@ from . import checkpoint as ckpt
 from .lighting import WEIGHTS_DIR, load_prior
 from .networks import InverseNet, ShadowNet, repair_top_rows
 from .objectives import decompose_and_solve
-from .source_lighting import SourceLightingConfig, solve_source_lighting
+from .source_lighting import SourceLightingConfig, grey_world_level, solve_source_lighting
 
 DEFAULT_METHOD = "proposed"
 """The method of ``relight`` and the command line unless told: the shipped renderer on top of the quotient
 image, which beat ``quotient`` on both held-out sets (docs/experiments/29-renderer-on-the-quotient.md)."""
 
-__all__ = ["DEFAULT_FOV_DEG", "LIGHTING_ESTIMATORS", "RELIGHT_METHODS", "SKY_SOURCES", "SKY_TYPES", "WEIGHT_FILES", "Relighter", "dc_luminance",
+__all__ = ["DEFAULT_FOV_DEG", "LIGHTING_ESTIMATORS", "RELIGHT_METHODS", "SKY_LEVELS", "SKY_SOURCES", "SKY_TYPES", "WEIGHT_FILES", "Relighter", "dc_luminance",
            "envmap_sun", "estimate_camera_pitch", "estimate_pitch", "exposure_scale", "fitted_sky", "fill_weights_folder", "match_exposure", "pitch_from_verticals", "rotate_azimuth", "sky_map_kind",
            "sun_lighting", "sun_sky_map", "target_sky", "transfer_to_full_resolution", "working_resolution"]
 
@@ -177,6 +177,12 @@ class Relighter:
         # SkyGAN's sky is blurred within the mask by a Gaussian of this fraction of the short side
         # (learned.sky_gan.smooth_sky; None: SMOOTH_SIGMA, 1/8; 0: SkyGAN's own sky; study 31).
         self.sky_smooth: float | None = None
+        # The level of the estimated source lighting that a rendered sky (sky source "target" or "fit") is put
+        # in, on the estimated track: "grey_world", the level under which the foreground's median albedo is
+        # middle grey (learned.source_lighting.grey_world_level; study 36), or "decomposition", the lighting
+        # estimate's own (the network's albedo; the figures before). The relit foreground does not depend on
+        # it (a quotient of two shadings of one estimate); the sky's brightness against it does.
+        self.sky_level = "grey_world"
         # A quotient-based renderer's gain for the target divided by its gain for the source lighting itself,
         # so a photo relit to its own lighting gets the quotient's ratio alone. Off: measured worse on data/val5
         # (l1 +0.0053 against the plain gain, +0.0011 against quotient; study 29).
@@ -686,6 +692,14 @@ class Relighter:
                 # A rendered sky comes in the relit foreground's units: the target was scaled by
                 # dc(out target) / dc(target) into the decomposition's (= the photo's linear) units.
                 k = float(dc_luminance(out["target"])[0] / dc_luminance(target_cam[None])[0])
+                # On the estimated track that level is the estimate's, a guess of the network's albedo; a light
+                # meter's (grey world) is closer (study 36), and the sky's brightness against the foreground
+                # is proportional to it.
+                if source is None and self.sky_level == "grey_world":
+                    small, small_sky = working_resolution(lin, sky, self.res)
+                    k *= float(grey_world_level(small, out["normals"], out["lighting"], ~small_sky)[0])
+                elif source is None and self.sky_level != "decomposition":
+                    raise ValueError(f"sky_level must be one of {SKY_LEVELS}, got {self.sky_level!r}")
                 radiance = (target_sky(target, K, T, h, w, sky_type, azimuth_deg) if sky_from == "target"
                             else fitted_sky(self.target_lighting(turned, None, sky_type), K, T, h, w)) * k
                 relit = torch.where(sky, radiance.permute(2, 0, 1)[None].to(relit.dtype), relit)
@@ -749,6 +763,7 @@ def match_exposure(target: torch.Tensor, estimated_source: torch.Tensor, given_s
 
 
 SKY_TYPES = ("clear", "overcast")
+SKY_LEVELS = ("grey_world", "decomposition")
 
 
 def _sun_direction(direction: Any) -> np.ndarray:

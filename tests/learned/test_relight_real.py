@@ -71,8 +71,10 @@ def test_02_the_targets_own_sky_is_the_crop_renderers_view(relighter) -> None:
 
 def test_03_relight_paints_the_target_sky_in_the_foregrounds_units(relighter) -> None:
     """With a given sky mask and camera, the relit sky is the target's view times the same scale the
-    foreground's target got (keep exposure: no gain on top)."""
-    from learned.relighter import dc_luminance, target_sky
+    foreground's target got and the grey-world level of the estimate (keep exposure: no gain on top;
+    study 36)."""
+    from learned.relighter import dc_luminance, target_sky, working_resolution
+    from learned.source_lighting import grey_world_level
     from physrelight import envmap
 
     env = envmap.read(FOREST)
@@ -86,6 +88,8 @@ def test_03_relight_paints_the_target_sky_in_the_foregrounds_units(relighter) ->
     work = relighter.relight_full_resolution(lin, torch.from_numpy(sky)[None, None], target_cam,
                                              method="quotient")["working"]
     k = float(dc_luminance(work["target"])[0] / dc_luminance(target_cam[None])[0])
+    small, small_sky = working_resolution(lin, torch.from_numpy(sky)[None, None], relighter.res)
+    k *= float(grey_world_level(small, work["normals"], work["lighting"], ~small_sky)[0])
     K = panorama.view_intrinsics(60.0, 90, 60)
     want = colour.to_ldr(target_sky(env, K, T, 60, 90) * k).numpy()
     np.testing.assert_allclose(out[sky], want[sky], atol=1e-5)
@@ -503,3 +507,38 @@ def test_12_an_sh_targets_sun_is_the_one_its_sh_came_from(relighter) -> None:
         assert np.allclose(e_got, e_want, rtol=rtol)
     overcast = relighter.target_sun(sun_lighting(d, "overcast"))
     assert overcast is None or float(overcast.abs().max()) < 1e-3 * float(np.abs(sun_lighting(d, "overcast")).max())
+
+
+def test_13_a_rendered_sky_takes_the_grey_world_level_and_the_foreground_does_not(relighter) -> None:
+    """On the estimated track a rendered sky is put in the grey-world level (study 36): against the estimate's
+    own level (``sky_level="decomposition"``) the sky's linear radiance is ``grey_world_level`` times as high
+    and the foreground is bit-identical; on the known track (a given source) the level is the given one."""
+    from learned.relighter import working_resolution
+    from learned.source_lighting import grey_world_level
+
+    photo = _outdoor(60, 80)
+    mask = np.zeros((60, 80), dtype=bool)
+    mask[:20] = True
+    env = envmap.read(FOREST)
+    kw = dict(sky_mask=mask, method="quotient", exposure="keep", pitch_deg=10.0)
+    assert relighter.sky_level == "grey_world"
+    grey = relighter.relight(photo, env, **kw).astype(np.float64)
+    known_grey = relighter.relight(photo, env, source=env, **kw).astype(np.float64)
+    relighter.sky_level = "decomposition"
+    try:
+        own = relighter.relight(photo, env, **kw).astype(np.float64)
+        known_own = relighter.relight(photo, env, source=env, **kw).astype(np.float64)
+    finally:
+        relighter.sky_level = "grey_world"
+    assert np.array_equal(grey[~mask], own[~mask]) and np.array_equal(known_grey, known_own)
+    lin = colour.from_ldr(torch.from_numpy(photo).permute(2, 0, 1)[None].double() / 255)
+    small, small_sky = working_resolution(lin.float(), torch.from_numpy(mask)[None, None], relighter.res)
+    dec = relighter.decompose_linear(small, small_sky)
+    g = float(grey_world_level(small, dec["normals"], dec["lighting"], ~small_sky)[0])
+    assert abs(math.log(g)) > 0.05  # the two levels differ on this photo, so the check below can fail
+    to_lin = lambda x: colour.srgb_to_linear(torch.from_numpy(x))  # noqa: E731
+    sky_g, sky_o = to_lin(grey[mask]), to_lin(own[mask])
+    ok = (sky_o > 0.02) & (sky_g < 0.97) & (sky_o < 0.97)  # away from 8-bit black and clipping
+    assert int(ok.sum()) > 100
+    ratio = float(torch.median(sky_g[ok] / sky_o[ok]))
+    assert ratio == pytest.approx(g, rel=0.02)

@@ -229,3 +229,37 @@ def test_10_relighter_estimator_switch():
     la = a.decompose_linear(image, sky)["lighting"]
     lb = new.decompose_linear(image, sky)["lighting"]
     assert torch.allclose(la, lb, rtol=1e-4, atol=1e-6 * float(la.abs().max()))
+
+
+def test_11_the_grey_world_level_is_what_a_light_meter_reads():
+    """``grey_world_level`` gives the factor under which the foreground's median implied albedo is 0.18:
+    1 for a scene of median albedo 0.18 lit by exactly ``L``, 2 for albedo 0.36 (or the same photo twice as
+    bright: exposure-equivariant), the assumed albedo's inverse; pixels outside the foreground do not count;
+    too few pixels give 1; bad shapes and albedos are refused."""
+    from learned.source_lighting import GREY_WORLD_ALBEDO, grey_world_level
+
+    g = torch.Generator().manual_seed(0)
+    n = torch.nn.functional.normalize(torch.randn(1, 3, 12, 16, generator=g) + torch.tensor([0.0, 1.0, 1.0])[:, None, None], dim=1)
+    L = torch.zeros(1, 9, 3, dtype=torch.float64)
+    L[0, 0] = 1.0
+    L[0, 2] = 0.6  # brighter from above (+Y)
+    albedo = torch.full((1, 3, 12, 16), GREY_WORLD_ALBEDO, dtype=torch.float64)
+    albedo[..., :, :5] *= torch.rand(1, 3, 12, 5, generator=g, dtype=torch.float64) * 0.5 + 0.5  # below the median
+    albedo[..., :, 11:] *= 1.0 + torch.rand(1, 3, 12, 5, generator=g, dtype=torch.float64)  # above it
+    photo = albedo * image_model.shading(n.double(), L)
+    fg = torch.ones(1, 1, 12, 16, dtype=torch.bool)
+    assert float(grey_world_level(photo, n, L, fg)[0]) == pytest.approx(1.0, rel=1e-9)
+    assert float(grey_world_level(2 * photo, n, L, fg)[0]) == pytest.approx(2.0, rel=1e-9)
+    assert float(grey_world_level(photo, n, L, fg, albedo=0.09)[0]) == pytest.approx(2.0, rel=1e-9)
+    bright_sky = photo.clone()
+    bright_sky[..., :3, :] = 50.0
+    fg[..., :3, :] = False
+    assert float(grey_world_level(bright_sky, n, L, fg)[0]) == pytest.approx(
+        float(grey_world_level(photo, n, L, fg)[0]), rel=1e-12)
+    few = torch.zeros_like(fg)
+    few[..., 0, :10] = True
+    assert float(grey_world_level(photo, n, L, few)[0]) == 1.0
+    with pytest.raises(ValueError, match="albedo"):
+        grey_world_level(photo, n, L, fg, albedo=0.0)
+    with pytest.raises(ValueError, match="must be"):
+        grey_world_level(photo, n[..., :-1], L, fg)

@@ -15,7 +15,7 @@ __all__ = ["BOUNDARY_TOLERANCE", "ESTIMATES", "PSNR_CAP", "SEGMENTERS", "SELF_ME
            "targets_for", "top_rows_sky"]
 
 SEGMENTERS = ("segmenter", "segmenter_64px", "top_rows", "brightness")
-ESTIMATES = ("proposed", "prior_mean", "truth_order2")
+ESTIMATES = ("proposed", "grey_world", "prior_mean", "truth_order2")
 SKY_SOURCES = ("target", "fit", "skygan", "sh_radiance", "keep", "exact_view")
 SELF_METHODS = ("quotient_known", "quotient", "proposed", "lambertian_sh", "shadownet_lambertian", "identity")
 BOUNDARY_TOLERANCE = 2.0

@@ -163,9 +163,9 @@ def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
     lines += _table(groups, s, ESTIMATES, lambda g, r: g["lighting"][r]["shading_error"], "estimate")
     lines += ["", "Level error |log2(DC estimate / DC truth)| in stops (the estimate's units are the linearised "
               "photo's; the albedo-lighting scale is part of it):", ""]
-    lines += _table(groups, s, ESTIMATES[:2], lambda g, r: g["lighting"][r]["abs_level_stops"], "estimate", 2)
+    lines += _table(groups, s, ESTIMATES[:3], lambda g, r: g["lighting"][r]["abs_level_stops"], "estimate", 2)
     lines += ["", "Signed level error in stops:", ""]
-    lines += _table(groups, s, ESTIMATES[:2], lambda g, r: g["lighting"][r]["level_stops"], "estimate", 2)
+    lines += _table(groups, s, ESTIMATES[:3], lambda g, r: g["lighting"][r]["level_stops"], "estimate", 2)
     lines += ["", "The same on the crops counted apart (no sky, or mostly ground):", ""]
     lines += _table(groups, s, ESTIMATES, lambda g, r: g["lighting"][r]["shading_error_apart"], "estimate")
     lines += ["", "Cross-view consistency: two crops of one panorama, their estimates turned into the world frame, "
