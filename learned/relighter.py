@@ -462,13 +462,14 @@ class Relighter:
 
         Returns:
             ``relit`` ``(B, 3, H, W)`` linear at full size (sky pixels = ``image``), ``working``
-            (:meth:`relight_linear`'s dict at the working resolution) and ``working_sky``.
+            (:meth:`relight_linear`'s dict at the working resolution), ``working_image`` and ``working_sky``
+            (the image and sky mask it was relit from).
         """
         small, small_sky = working_resolution(image, sky, self.res if working_res is None else working_res)
         out = self.relight_linear(small, small_sky, target, source_lighting=source_lighting, method=method,
                                   decomposition=decomposition, known_source=known_source, **sun)
         relit = torch.where(sky, image, transfer_to_full_resolution(image, small, out["relit"]))
-        return {"relit": relit, "working": out, "working_sky": small_sky}
+        return {"relit": relit, "working": out, "working_image": small, "working_sky": small_sky}
 
     def paint_sky(self, relit: torch.Tensor, sky: torch.Tensor, working: dict[str, torch.Tensor],
                   working_sky: torch.Tensor, seed: int = 0, smooth: float | None = None) -> torch.Tensor:
@@ -696,8 +697,10 @@ class Relighter:
                 # meter's (grey world) is closer (study 36), and the sky's brightness against the foreground
                 # is proportional to it.
                 if source is None and self.sky_level == "grey_world":
-                    small, small_sky = working_resolution(lin, sky, self.res)
-                    k *= float(grey_world_level(small, out["normals"], out["lighting"], ~small_sky)[0])
+                    if "grey_world" not in reuse:  # one decomposition per photo, so one level
+                        reuse["grey_world"] = float(grey_world_level(full["working_image"], out["normals"],
+                                                                     out["lighting"], ~small_sky)[0])
+                    k *= reuse["grey_world"]
                 elif source is None and self.sky_level != "decomposition":
                     raise ValueError(f"sky_level must be one of {SKY_LEVELS}, got {self.sky_level!r}")
                 radiance = (target_sky(target, K, T, h, w, sky_type, azimuth_deg) if sky_from == "target"

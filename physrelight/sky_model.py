@@ -37,6 +37,7 @@ import numpy as np
 import torch
 
 from physrelight import rotations, sh
+from physrelight.envmap import direction_from_angles
 from physrelight._checks import Array
 
 __all__ = ["ANGSTROM_ALPHA", "ANGSTROM_BETA", "CLEAR_HORIZON", "CLEAR_ZENITH", "COMPONENTS", "FIT_GLOW_EXPONENT",
@@ -217,13 +218,6 @@ def sun_colour(elevation_deg: float) -> np.ndarray:
     return c / float(np.asarray(LUMINANCE) @ c)
 
 
-def _sun_direction(elevation_deg: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray:
-    """``(..., 3)``: :func:`physrelight.envmap.direction_from_angles`."""
-    from physrelight.envmap import direction_from_angles
-
-    return direction_from_angles(elevation_deg, azimuth_deg)
-
-
 def _project(maps: np.ndarray) -> np.ndarray:
     """``(9, C)`` order-2 SH of ``C`` scalar lat-long maps ``(H, 2H, C)``, three at a time."""
     pad = (-maps.shape[-1]) % 3
@@ -254,7 +248,7 @@ def _glow_by_elevation(exponent: float) -> tuple[np.ndarray, np.ndarray]:
 
     d = envmap.directions(_MAP_HEIGHT, 2 * _MAP_HEIGHT)
     elev = np.arange(0.0, 90.0 + 1e-9, _COARSE_STEP_DEG)
-    glows = np.stack([sun_glow(d, _sun_direction(np.array(e), np.array(0.0)), exponent) for e in elev], -1)
+    glows = np.stack([sun_glow(d, direction_from_angles(e, 0.0), exponent) for e in elev], -1)
     return elev, _project(glows).T
 
 
@@ -269,7 +263,7 @@ def _glow_sh(elevation_deg: np.ndarray, azimuth_deg: np.ndarray, exponent: float
 
 def _design(elevation_deg: np.ndarray, azimuth_deg: np.ndarray, exponent: float = GLOW_EXPONENT) -> np.ndarray:
     """``(N, 3, 9, 5)``: per channel, the SH of each part (:data:`COMPONENTS`) for suns at the given directions."""
-    s = _sun_direction(elevation_deg, azimuth_deg)
+    s = direction_from_angles(elevation_deg, azimuth_deg)
     n = len(s)
     moving = np.stack([np.asarray(sh.basis(s, 2)).reshape(n, 9), _glow_sh(elevation_deg, azimuth_deg, exponent)], -1)
     fixed = np.broadcast_to(_fixed_parts().transpose(2, 0, 1)[None], (n, 3, 9, 3))
@@ -377,7 +371,7 @@ def _fit_sky(key: bytes, glow_exponent: float) -> SkyFit:
     fe, fa = np.meshgrid(np.clip(e[i] + fine, 0.0, 90.0), a[i] + fine, indexing="ij")
     fe, fa = fe.ravel(), fa.ravel()
     j, w, _, r2 = solve(fe, fa)
-    s = _sun_direction(np.array(fe[j]), np.array(fa[j]))
+    s = direction_from_angles(fe[j], fa[j])
     s, w = s / np.linalg.norm(s), np.array(w)
     s.setflags(write=False)  # remembered by the cache: shared between callers
     w.setflags(write=False)

@@ -45,7 +45,7 @@ def test_02_a_sky_made_of_the_models_parts_is_found_again(elev: float, azim: flo
     """A sun off the search grid, a clear sky, haze and ground: the direction comes back within the fine
     step (0.25 deg, up to its diagonal) and the SH within 1 % (the fit's parts are projected at 64 x 128,
     the test's at 256 x 512)."""
-    s = sm._sun_direction(np.array(elev), np.array(azim))
+    s = envmap.direction_from_angles(np.array(elev), np.array(azim))
     w = np.array([[3.0, 2.7, 2.2], [0.0, 0.0, 0.0], [0.05, 0.08, 0.15], [0.02, 0.02, 0.03], [0.04, 0.035, 0.03]])
     c = _model_sh(s, w)
     fit = sm.fit_sky(c)
@@ -73,7 +73,7 @@ def test_03_an_overcast_sky_is_all_overcast_and_renders_as_the_cie_sky() -> None
 
 def test_04_the_suns_disc_is_where_the_sun_is_and_carries_its_irradiance() -> None:
     """Looking straight at the fitted sun, the disc's pixels integrate to the sun's irradiance."""
-    s = sm._sun_direction(np.array(30.0), np.array(0.0))
+    s = envmap.direction_from_angles(np.array(30.0), np.array(0.0))
     w = np.zeros((5, 3))
     w[0], w[2] = [2.0, 2.0, 2.0], [0.05, 0.08, 0.15]
     fit = sm.fit_sky(_model_sh(s, w))

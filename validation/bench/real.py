@@ -42,7 +42,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-from learned.relighter import estimate_pitch, fitted_sky, target_sky, working_resolution
+from learned.relighter import estimate_pitch, fitted_sky, target_sky
 from learned.source_lighting import grey_world_level
 from physrelight import colour, envmap, metrics, panorama, sh
 
@@ -141,8 +141,7 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
     R = crop.rotation
     cam_normals = normals @ R.T  # n_c = R n_w
     truth = truth_irradiance * g[None, :]
-    small, small_sky = working_resolution(lin, seg, relighter.res)
-    grey = float(grey_world_level(small, work["normals"], work["lighting"], ~small_sky)[0])
+    grey = float(grey_world_level(full["working_image"], work["normals"], work["lighting"], ~full["working_sky"])[0])
     estimates = {"proposed": work["lighting"][0].double().numpy(),
                  # the same shape at a light meter's level: what a rendered sky is put in (study 36)
                  "grey_world": work["lighting"][0].double().numpy() * grey,

@@ -14,7 +14,7 @@ import torch
 
 from learned import Relighter
 from learned.relighter import SKY_BOUND_MARGIN_DEG, estimate_pitch, pitch_from_verticals
-from synth.panorama_crops import make_crops, shipped_panoramas
+from real_crop_scores import bench_crops, crop_panoramas
 
 MARGINS = (0.0, 2.0, 5.0, float("inf"))  # inf: the vanishing point whenever it has one
 
@@ -26,14 +26,13 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(2)
     r = Relighter.load()
-    group = "heldout" if args.heldout else "training"
+    group, panos = crop_panoramas(args.heldout)
     rows = []
-    for pano in [p for p in shipped_panoramas() if p.group == group]:
-        for c in make_crops(pano, 16, 0, fov_range=(45.0, 75.0), samples=4):
-            lin = c.linear()
-            seg, _ = r.photo_sky(lin)
-            rows.append({"panorama": pano.name, "index": c.index, "true": c.pitch_deg,
-                         "sky": estimate_pitch(seg[0, 0], c.K), "verticals": pitch_from_verticals(lin, c.K)})
+    for pano, c in bench_crops(panos):
+        lin = c.linear()
+        seg, _ = r.photo_sky(lin)
+        rows.append({"panorama": pano.name, "index": c.index, "true": c.pitch_deg,
+                     "sky": estimate_pitch(seg[0, 0], c.K), "verticals": pitch_from_verticals(lin, c.K)})
     t = np.array([x["true"] for x in rows])
     s = np.array([x["sky"] for x in rows])
     v = np.array([np.nan if x["verticals"] is None else x["verticals"] for x in rows])

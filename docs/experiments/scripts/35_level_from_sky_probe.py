@@ -17,7 +17,7 @@ from learned.relighter import estimate_pitch, working_resolution
 from learned.source_lighting import camera_directions, sky_observations
 from physrelight import colour, panorama, sh
 from physrelight.sky_model import fit_sky, sky_view
-from synth.panorama_crops import make_crops, shipped_panoramas
+from real_crop_scores import bench_crops, crop_panoramas
 from validation.bench.real_metrics import level_stops
 
 CANDIDATES = ("decomposition", "sh", "fit")
@@ -51,25 +51,24 @@ def main() -> None:
     torch.set_num_threads(2)
     t0 = time.perf_counter()
     r = Relighter.load()
-    group = "heldout" if args.heldout else "training"
+    group, panos = crop_panoramas(args.heldout)
     rows = []
-    for pano in [p for p in shipped_panoramas() if p.group == group]:
-        for c in make_crops(pano, 16, 0, fov_range=(45.0, 75.0), samples=4):
-            if not c.sky.any():
-                continue
-            lin = c.linear()
-            seg, why = r.photo_sky(lin)
-            source = c.lighting_sh(2) * c.gain[None, :]
-            small, small_sky = working_resolution(lin, seg, r.res)  # what relight decomposes
-            dec = r.decompose_linear(small, small_sky)
-            L = dec["lighting"][0].double().numpy()
-            pitch = estimate_pitch(seg[0, 0], c.K)
-            gains = sky_gains(L, lin, seg, c.K, pitch) if not why else {k: 1.0 for k in CANDIDATES}
-            row = {"panorama": pano.name, "index": c.index, "no_sky_reason": why, "gains": gains,
-                   "level_stops": {k: level_stops(L * g, source) for k, g in gains.items()}}
-            row["level_stops"]["prior_mean"] = level_stops(np.asarray(r.prior.mean, dtype=np.float64).reshape(9, 3), source)
-            rows.append(row)
-            print(pano.name, c.index, {k: round(v, 2) for k, v in row["level_stops"].items()}, flush=True)
+    for pano, c in bench_crops(panos):
+        if not c.sky.any():
+            continue
+        lin = c.linear()
+        seg, why = r.photo_sky(lin)
+        source = c.lighting_sh(2) * c.gain[None, :]
+        small, small_sky = working_resolution(lin, seg, r.res)  # what relight decomposes
+        dec = r.decompose_linear(small, small_sky)
+        L = dec["lighting"][0].double().numpy()
+        pitch = estimate_pitch(seg[0, 0], c.K)
+        gains = sky_gains(L, lin, seg, c.K, pitch) if not why else {k: 1.0 for k in CANDIDATES}
+        row = {"panorama": pano.name, "index": c.index, "no_sky_reason": why, "gains": gains,
+               "level_stops": {k: level_stops(L * g, source) for k, g in gains.items()}}
+        row["level_stops"]["prior_mean"] = level_stops(np.asarray(r.prior.mean, dtype=np.float64).reshape(9, 3), source)
+        rows.append(row)
+        print(pano.name, c.index, {k: round(v, 2) for k, v in row["level_stops"].items()}, flush=True)
     summary = {}
     for k in (*CANDIDATES, "prior_mean"):
         a = np.array([row["level_stops"][k] for row in rows])

@@ -15,7 +15,7 @@ import torch
 from learned import Relighter
 from learned.relighter import working_resolution
 from physrelight import colour, image_model
-from synth.panorama_crops import make_crops, shipped_panoramas
+from real_crop_scores import bench_crops, crop_panoramas
 from validation.bench.real_metrics import level_stops
 
 GREY = 0.18  # a light meter's middle grey, fixed before the run
@@ -41,24 +41,23 @@ def main() -> None:
     torch.set_num_threads(2)
     t0 = time.perf_counter()
     r = Relighter.load()
-    group = "heldout" if args.heldout else "training"
+    group, panos = crop_panoramas(args.heldout)
     rows = []
-    for pano in [p for p in shipped_panoramas() if p.group == group]:
-        for c in make_crops(pano, 16, 0, fov_range=(45.0, 75.0), samples=4):
-            lin = c.linear()
-            seg, why = r.photo_sky(lin)
-            source = c.lighting_sh(2) * c.gain[None, :]
-            small, small_sky = working_resolution(lin, seg, r.res)  # what relight decomposes
-            dec = r.decompose_linear(small, small_sky)
-            L = dec["lighting"][0].double()
-            g = grey_world_gain(small, ~small_sky[0, 0], dec["normals"][0], L)
-            Ln = L.numpy()
-            row = {"panorama": pano.name, "index": c.index, "true_sky": bool(c.sky.any()), "gain": g,
-                   "level_stops": {"decomposition": level_stops(Ln, source), "grey_world": level_stops(Ln * g, source),
-                                   "prior_mean": level_stops(np.asarray(r.prior.mean, dtype=np.float64).reshape(9, 3),
-                                                             source)}}
-            rows.append(row)
-            print(pano.name, c.index, row["true_sky"], {k: round(v, 2) for k, v in row["level_stops"].items()}, flush=True)
+    for pano, c in bench_crops(panos):
+        lin = c.linear()
+        seg, why = r.photo_sky(lin)
+        source = c.lighting_sh(2) * c.gain[None, :]
+        small, small_sky = working_resolution(lin, seg, r.res)  # what relight decomposes
+        dec = r.decompose_linear(small, small_sky)
+        L = dec["lighting"][0].double()
+        g = grey_world_gain(small, ~small_sky[0, 0], dec["normals"][0], L)
+        Ln = L.numpy()
+        row = {"panorama": pano.name, "index": c.index, "true_sky": bool(c.sky.any()), "gain": g,
+               "level_stops": {"decomposition": level_stops(Ln, source), "grey_world": level_stops(Ln * g, source),
+                               "prior_mean": level_stops(np.asarray(r.prior.mean, dtype=np.float64).reshape(9, 3),
+                                                         source)}}
+        rows.append(row)
+        print(pano.name, c.index, row["true_sky"], {k: round(v, 2) for k, v in row["level_stops"].items()}, flush=True)
     summary = {}
     for part, keep in (("with_sky", True), ("without_sky", False)):
         sel = [row for row in rows if row["true_sky"] == keep]

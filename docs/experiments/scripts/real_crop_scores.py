@@ -1,4 +1,5 @@
-"""What the sky-mask probes (studies 26, 28, 30) and the bench-pair probes (studies 29, 33) share.
+"""What the sky-mask probes (studies 26, 28, 30), the crop probes (studies 34-36) and the bench-pair probes
+(studies 29, 33) share.
 
 Sky masks: every ``bench --real --full`` crop (seed 0, 16 per panorama, fov 45-75 deg, 4 samples) of the
 training panoramas or of the held-out one, each mask setting scored against the true sky: IoU and boundary
@@ -9,7 +10,7 @@ Bench pairs: foreground l1 of several methods on the bench's cross-relighting pa
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -26,32 +27,41 @@ def crop_panoramas(heldout: bool) -> tuple[str, list[Any]]:
     return group, [p for p in shipped_panoramas() if p.group == group]
 
 
+def bench_crops(panos: Sequence[Any]) -> Iterator[tuple[Any, Any]]:
+    """``(panorama, crop)`` for every ``bench --real --full`` crop of ``panos`` (seed 0, 16 per panorama, fov
+    45-75 deg, 4 samples), in order."""
+    from synth.panorama_crops import make_crops
+
+    for pano in panos:
+        for c in make_crops(pano, 16, 0, fov_range=(45.0, 75.0), samples=4):
+            yield pano, c
+
+
 def score_sky_masks(panos: Sequence[Any], grid: Sequence[str],
                     masks_of: Callable[[torch.Tensor], dict[str, tuple[torch.Tensor, str]]]) -> dict[str, dict[str, Any]]:
     """Per setting of ``grid``, the lists ``iou``, ``f``, ``no_sky_called`` and the count ``refused_with_sky``.
 
     ``masks_of(linear photo (1, 3, H, W))`` gives every setting's ``(sky (1, 1, H, W) bool, reason)`` for one
     crop (so a probe can share work between settings)."""
-    from synth.panorama_crops import make_crops
-
     rows = {g: {"iou": [], "f": [], "no_sky_called": [], "refused_with_sky": 0} for g in grid}
     t0 = time.time()
-    for pano in panos:
-        for c in make_crops(pano, 16, 0, fov_range=(45.0, 75.0), samples=4):
-            lin = c.linear()
-            has_sky = c.sky.mean() >= 0.01
-            masks = masks_of(lin)
-            for g in grid:
-                sky, why = masks[g]
-                m = sky[0, 0].numpy()
-                row = rows[g]
-                if has_sky:
-                    row["iou"].append(metrics.mask_iou(m, c.sky))
-                    row["f"].append(metrics.boundary_f(m, c.sky, 2.0))
-                    row["refused_with_sky"] += bool(why)
-                else:
-                    row["no_sky_called"].append(float(m.mean()))
-        print(f"{pano.name}: {time.time() - t0:.0f} s", flush=True)
+    crops = list(bench_crops(panos))
+    for i, (pano, c) in enumerate(crops):
+        lin = c.linear()
+        has_sky = c.sky.mean() >= 0.01
+        masks = masks_of(lin)
+        for g in grid:
+            sky, why = masks[g]
+            m = sky[0, 0].numpy()
+            row = rows[g]
+            if has_sky:
+                row["iou"].append(metrics.mask_iou(m, c.sky))
+                row["f"].append(metrics.boundary_f(m, c.sky, 2.0))
+                row["refused_with_sky"] += bool(why)
+            else:
+                row["no_sky_called"].append(float(m.mean()))
+        if i + 1 == len(crops) or crops[i + 1][0] is not pano:
+            print(f"{pano.name}: {time.time() - t0:.0f} s", flush=True)
     return rows
 
 
