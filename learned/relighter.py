@@ -187,6 +187,10 @@ class Relighter:
         # so a photo relit to its own lighting gets the quotient's ratio alone. Off: measured worse on data/val5
         # (l1 +0.0053 against the plain gain, +0.0011 against quotient; study 29).
         self.renderer_gain_ratio = False
+        # The photo's sensor noise averaged out before relighting, as (radius, strength) of
+        # physrelight.denoise.denoise (the noise's level estimated from the photo itself); None: off, the
+        # figures before study 37.
+        self.denoise: tuple[int, float] | None = DENOISE
 
     @property
     def renderer_base(self) -> str | None:
@@ -442,6 +446,16 @@ class Relighter:
         return {"relit": relit, "target": tgt, "target_shadow": s, **{k: out[k] for k in (
             "albedo", "normals", "shadow", "lighting", "foreground")}}
 
+    def denoised(self, image: torch.Tensor) -> torch.Tensor:
+        """``(B, 3, H, W)`` linear ``image`` with its sensor noise averaged out by :attr:`denoise`
+        (:func:`physrelight.denoise.denoise`; the image itself when :attr:`denoise` is None): what the
+        foreground is relit from."""
+        if self.denoise is None:
+            return image
+        from physrelight.denoise import denoise
+
+        return denoise(image.float(), *self.denoise)
+
     @torch.no_grad()
     def relight_full_resolution(self, image: torch.Tensor, sky: torch.Tensor, target: torch.Tensor,
                                 source_lighting: torch.Tensor | None = None, method: str = DEFAULT_METHOD,
@@ -452,7 +466,9 @@ class Relighter:
 
         The image is resized so its short side is ``working_res`` (None: the networks' ``res``;
         :func:`working_resolution`), relit there, and brought back by ratio transfer
-        (:func:`transfer_to_full_resolution`), so detail finer than the working resolution survives.
+        (:func:`transfer_to_full_resolution`), so detail finer than the working resolution survives. With
+        :attr:`denoise` (the default, study 37) the foreground is relit from the photo with its sensor noise
+        averaged out (:func:`physrelight.denoise.denoise`); sky pixels stay the photo's own.
 
         Args:
             image: ``(B, 3, H, W)`` linear; sky ``(B, 1, H, W)`` bool; target, source_lighting,
@@ -463,12 +479,13 @@ class Relighter:
         Returns:
             ``relit`` ``(B, 3, H, W)`` linear at full size (sky pixels = ``image``), ``working``
             (:meth:`relight_linear`'s dict at the working resolution), ``working_image`` and ``working_sky``
-            (the image and sky mask it was relit from).
+            (the image, denoised when :attr:`denoise` is set, and sky mask it was relit from).
         """
-        small, small_sky = working_resolution(image, sky, self.res if working_res is None else working_res)
+        clean = self.denoised(image)  # the foreground is relit from it; the sky is kept as it is
+        small, small_sky = working_resolution(clean, sky, self.res if working_res is None else working_res)
         out = self.relight_linear(small, small_sky, target, source_lighting=source_lighting, method=method,
                                   decomposition=decomposition, known_source=known_source, **sun)
-        relit = torch.where(sky, image, transfer_to_full_resolution(image, small, out["relit"]))
+        relit = torch.where(sky, image, transfer_to_full_resolution(clean, small, out["relit"]))
         return {"relit": relit, "working": out, "working_image": small, "working_sky": small_sky}
 
     def paint_sky(self, relit: torch.Tensor, sky: torch.Tensor, working: dict[str, torch.Tensor],
@@ -764,6 +781,10 @@ def match_exposure(target: torch.Tensor, estimated_source: torch.Tensor, given_s
     """``target (B, 9, 3)`` times :func:`exposure_scale`: the target in a decomposition's units."""
     return target * exposure_scale(target, estimated_source, given_source, fallback)[:, None, None]
 
+
+DENOISE = (2, 3.0)
+"""``Relighter.denoise``'s default (radius, strength): chosen on data/val5 by study 37's rule
+(docs/experiments/37-denoise-before-the-quotient.md)."""
 
 SKY_TYPES = ("clear", "overcast")
 SKY_LEVELS = ("grey_world", "decomposition")

@@ -310,12 +310,13 @@ def test_06_cli_sequence_steps_the_azimuth_by_360_over_n_from_the_given_azimuth(
 
 
 def _working(relighter, photo: np.ndarray, sky_mask: np.ndarray | None = None):
-    """The linear photo and its working-resolution image and sky (the given mask, else the segmenter's)."""
+    """The linear photo and its working-resolution image (denoised, as the pipeline relights it) and sky
+    (the given mask, else the segmenter's)."""
     from learned.relighter import working_resolution
 
     lin = colour.from_ldr(torch.from_numpy(photo).permute(2, 0, 1)[None].float() / 255.0)
     sky = relighter.sky_mask(lin, sky_mask)
-    small, small_sky = working_resolution(lin, sky, relighter.res)
+    small, small_sky = working_resolution(relighter.denoised(lin), sky, relighter.res)
     return lin, small, small_sky
 
 
