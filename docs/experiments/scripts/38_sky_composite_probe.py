@@ -14,6 +14,7 @@ pixels within 2 px of the true boundary ("band"), and over the whole image.
 from __future__ import annotations
 
 import argparse
+import importlib
 import time
 
 import numpy as np
@@ -23,10 +24,11 @@ import torch.nn.functional as F
 from learned import Relighter
 from learned import sky_segmentation as ss
 from physrelight import colour, io
-from physrelight.sky_composite import composite_sky
 from physrelight.stats import paired_bootstrap
 from real_crop_scores import bench_crops, crop_panoramas
 
+# the candidate, kept beside this probe (study 38 did not adopt it into physrelight)
+composite_sky = importlib.import_module("38_sky_composite").composite_sky
 GRID = ("0", "1", "2", "3")
 
 

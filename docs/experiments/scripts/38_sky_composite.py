@@ -1,4 +1,7 @@
-"""Putting a new sky behind a relit foreground: the boundary's mixed pixels un-mixed.
+"""Study 38's candidate, not adopted (docs/experiments/38-sky-composite-unmixed.md): it was
+``physrelight/sky_composite.py`` when the rule was written (commit 08f3d1a) and moved here after the result.
+
+Putting a new sky behind a relit foreground: the boundary's mixed pixels un-mixed.
 
 Why. A camera pixel on the sky line sees part sky and part land: ``I = alpha B + (1 - alpha) F``, with
 ``B`` the old sky's colour there and ``F`` the land's. A hard mask gives such a pixel wholly to one side.
