@@ -461,7 +461,8 @@ class Relighter:
                                 source_lighting: torch.Tensor | None = None, method: str = DEFAULT_METHOD,
                                 working_res: int | None = None,
                                 decomposition: dict[str, torch.Tensor] | None = None,
-                                known_source: bool = False, **sun: torch.Tensor | None) -> dict[str, Any]:
+                                known_source: bool = False, denoised: torch.Tensor | None = None,
+                                **sun: torch.Tensor | None) -> dict[str, Any]:
         """:meth:`relight_linear` at a working resolution, brought back to the image's size.
 
         The image is resized so its short side is ``working_res`` (None: the networks' ``res``;
@@ -475,13 +476,15 @@ class Relighter:
                 method, known_source, ``target_sun=``, ``source_sun=``: as for :meth:`relight_linear`.
             decomposition: the ``"working"`` dict of an earlier call on the same image and sky at the
                 same working resolution (its decomposition is reused), or None.
+            denoised: :meth:`denoised` of this very ``image``, when the caller has it (a sequence of
+                targets denoises its photo once), or None.
 
         Returns:
             ``relit`` ``(B, 3, H, W)`` linear at full size (sky pixels = ``image``), ``working``
             (:meth:`relight_linear`'s dict at the working resolution), ``working_image`` and ``working_sky``
             (the image, denoised when :attr:`denoise` is set, and sky mask it was relit from).
         """
-        clean = self.denoised(image)  # the foreground is relit from it; the sky is kept as it is
+        clean = self.denoised(image) if denoised is None else denoised  # the foreground is relit from it
         small, small_sky = working_resolution(clean, sky, self.res if working_res is None else working_res)
         out = self.relight_linear(small, small_sky, target, source_lighting=source_lighting, method=method,
                                   decomposition=decomposition, known_source=known_source, **sun)
@@ -643,8 +646,8 @@ class Relighter:
         photo ``lin (1, 3, H, W)``.
 
         ``reuse``, a dict this method fills on its first call for a photo and reads on later
-        ones: the sky mask, the camera and the working-resolution decomposition, which do not
-        depend on the target (:meth:`relight_sequence`)."""
+        ones: the sky mask, the camera, the denoised photo and the working-resolution decomposition,
+        which do not depend on the target (:meth:`relight_sequence`)."""
         import warnings
 
         from physrelight import panorama
@@ -692,9 +695,11 @@ class Relighter:
             source_cam = self.target_lighting(source, T, sky_type).float()
             suns["source_sun"] = self.target_sun(source, T, sky_type)
         suns = {k: None if v is None else v.float() for k, v in suns.items()}
+        if "denoised" not in reuse:  # one photo, one denoise, whatever the targets
+            reuse["denoised"] = self.denoised(lin)
         full = self.relight_full_resolution(lin, sky, target_cam, method=method, source_lighting=source_cam,
                                             decomposition=reuse.get("decomposition"), known_source=source is not None,
-                                            **suns)
+                                            denoised=reuse["denoised"], **suns)
         if "decomposition" not in reuse:
             reuse["decomposition"] = {k: full["working"][k] for k in (
                 "albedo", "normals", "shadow", "lighting", "foreground")}

@@ -47,10 +47,21 @@ def _window_sums(x: torch.Tensor, radius: int, dim: int) -> torch.Tensor:
     return c.index_select(dim, hi) - c.index_select(dim, lo)
 
 
+_POOL_MAX_RADIUS = 16
+"""Up to this radius :func:`box_filter` averages directly (two separable pools), beyond it by summed-area tables."""
+
+
 def box_filter(x: torch.Tensor, radius: int) -> torch.Tensor:
     """Mean of ``x (B, C, H, W)`` over the ``(2r+1)^2`` window of each pixel, the window cut at the
-    border (the mean of the pixels inside the image, not of zero padding). Summed-area tables,
-    so the cost does not grow with ``radius``."""
+    border (the mean of the pixels inside the image, not of zero padding). Small radii average
+    directly, a row pass then a column pass (the count of a window cut at the border factorises, so
+    the separable mean is exact); wide ones use summed-area tables, whose cost does not grow with
+    ``radius`` (at small radii several times slower: a 12-megapixel photo's relighting spends most of
+    its time here)."""
+    if radius <= _POOL_MAX_RADIUS:
+        k = 2 * radius + 1
+        rows = F.avg_pool2d(x, (1, k), stride=1, padding=(0, radius), count_include_pad=False)
+        return F.avg_pool2d(rows, (k, 1), stride=1, padding=(radius, 0), count_include_pad=False)
     h, w = x.shape[-2:]
     ones = torch.ones(1, 1, h, w, dtype=x.dtype, device=x.device)
     count = _window_sums(_window_sums(ones, radius, -2), radius, -1)

@@ -168,12 +168,14 @@ def test_08_a_sequence_decomposes_once_and_gives_the_frames_of_separate_relights
     sun = np.array([0.5, 0.6, 0.2])  # a sun direction (world frame), turned about the vertical
     azimuths = [0.0, 90.0, 200.0]
     separate = [relighter.relight(photo, sun, azimuth_deg=a, seed=3) for a in azimuths]
-    calls = []
-    original = type(relighter).decompose_linear
+    calls, denoised = [], []
+    original, original_denoised = type(relighter).decompose_linear, type(relighter).denoised
     monkeypatch.setattr(type(relighter), "decompose_linear",
                         lambda self, *a, **k: calls.append(1) or original(self, *a, **k))
+    monkeypatch.setattr(type(relighter), "denoised",
+                        lambda self, *a, **k: denoised.append(1) or original_denoised(self, *a, **k))
     frames = relighter.relight_sequence(photo, sun, azimuths, seed=3)
-    assert len(calls) == 1  # one decomposition for the whole sequence
+    assert len(calls) == 1 and len(denoised) == 1  # one decomposition and one denoise for the whole sequence
     assert len(frames) == 3
     for a, b in zip(frames, separate):
         np.testing.assert_array_equal(a, b)
