@@ -183,12 +183,12 @@ def _relight(args: argparse.Namespace) -> int:
         source = _target(args.source_env, args.source_sh, None, what="source")
     fov = args.fov if args.fov is not None else photo.fov_deg if photo.fov_deg is not None else None
 
-    from .relighter import DEFAULT_FOV_DEG, Relighter
+    from .relighter import DEFAULT_FOV_DEG, DENOISE, Relighter
 
     relighter = Relighter.load(args.weights)
     relighter.sky_grow = args.sky_grow
-    if args.no_denoise:
-        relighter.denoise = None
+    if args.denoise:
+        relighter.denoise = DENOISE
     common = dict(sky_mask=mask, method=args.method, sky=args.sky or "clear", new_sky=not args.keep_sky,
                   seed=args.seed, sky_source=args.sky_source, exposure=exposure,
                   fov_deg=fov if fov is not None else DEFAULT_FOV_DEG, pitch_deg=args.pitch, source=source)
@@ -259,9 +259,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sky-grow", type=number_in(0.0, 1.0, "a fraction of the photo's short side"), default=0.0,
                    metavar="FRAC", help="also call sky the sky-coloured pixels within FRAC of the short side of the "
                                         "found sky: lattices, bare branches (default: 0, off; docs/experiments/28)")
-    p.add_argument("--no-denoise", action="store_true",
-                   help="relight the photo as it is, sensor noise included (default: its noise, estimated from the "
-                        "photo, is averaged out first; docs/experiments/37)")
+    p.add_argument("--denoise", action="store_true",
+                   help="smooth the photo's noise before relighting, at a level estimated from the photo (off by "
+                        "default: it also smooths fine texture such as foliage; for dark, noisy photos; "
+                        "docs/experiments/37)")
     p.add_argument("--keep-sky", action="store_true", help="keep the photo's sky (same as --sky-source keep)")
     p.add_argument("--seed", type=int, default=0, help="SkyGAN noise seed (default: 0)")
     p.add_argument("--layers", default=None, help="also write albedo, normals, shadows, shading, sky mask here")

@@ -187,10 +187,11 @@ class Relighter:
         # so a photo relit to its own lighting gets the quotient's ratio alone. Off: measured worse on data/val5
         # (l1 +0.0053 against the plain gain, +0.0011 against quotient; study 29).
         self.renderer_gain_ratio = False
-        # The photo's sensor noise averaged out before relighting, as (radius, strength) of
-        # physrelight.denoise.denoise (the noise's level estimated from the photo itself); None: off, the
-        # figures before study 37.
-        self.denoise: tuple[int, float] | None = DENOISE
+        # The photo smoothed before relighting, as (radius, strength) of physrelight.denoise.denoise (DENOISE:
+        # study 37's setting, relight --denoise); None, the default: the photo as it is. Off by default: it
+        # helps the synthetic bench but its noise estimate reads pixel-scale texture as noise, and real foliage
+        # loses its texture (study 37).
+        self.denoise: tuple[int, float] | None = None
 
     @property
     def renderer_base(self) -> str | None:
@@ -468,8 +469,8 @@ class Relighter:
         The image is resized so its short side is ``working_res`` (None: the networks' ``res``;
         :func:`working_resolution`), relit there, and brought back by ratio transfer
         (:func:`transfer_to_full_resolution`), so detail finer than the working resolution survives. With
-        :attr:`denoise` (the default, study 37) the foreground is relit from the photo with its sensor noise
-        averaged out (:func:`physrelight.denoise.denoise`); sky pixels stay the photo's own.
+        :attr:`denoise` set (off by default, study 37) the foreground is relit from the photo smoothed by
+        :func:`physrelight.denoise.denoise`; sky pixels stay the photo's own.
 
         Args:
             image: ``(B, 3, H, W)`` linear; sky ``(B, 1, H, W)`` bool; target, source_lighting,
@@ -788,8 +789,8 @@ def match_exposure(target: torch.Tensor, estimated_source: torch.Tensor, given_s
 
 
 DENOISE = (2, 3.0)
-"""``Relighter.denoise``'s default (radius, strength): chosen on data/val5 by study 37's rule
-(docs/experiments/37-denoise-before-the-quotient.md)."""
+"""The (radius, strength) of ``Relighter.denoise`` when it is turned on (``relight --denoise``): chosen on
+data/val5 by study 37's rule; not the default (docs/experiments/37-denoise-before-the-quotient.md)."""
 
 SKY_TYPES = ("clear", "overcast")
 SKY_LEVELS = ("grey_world", "decomposition")

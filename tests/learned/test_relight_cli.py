@@ -128,22 +128,23 @@ def test_04_bad_input_is_one_line_and_non_zero(photo: Path, tmp_path: Path, caps
     assert re.search(match, err), err
 
 
-def test_05_no_denoise_relights_the_photo_as_it_is(photo: Path, tmp_path: Path) -> None:
-    """``--no-denoise`` is ``Relighter.denoise = None``: the command line's output equals the API's with the
-    denoise off, and differs from the default's on this photo of per-pixel detail (study 37's limit: white
-    per-pixel texture is taken for noise)."""
+def test_05_denoise_is_the_relighters_option(photo: Path, tmp_path: Path) -> None:
+    """``--denoise`` is ``Relighter.denoise = DENOISE`` (off by default, study 37): the command line's output
+    equals the API's with it on, and differs from the default's on this photo of per-pixel detail (which the
+    noise estimate takes for noise)."""
     from learned import Relighter
     from learned.relight_cli import sun_direction
+    from learned.relighter import DENOISE
 
     kw = dict(method="quotient", exposure="keep", new_sky=False, fov_deg=60.0)
     args = ["--sun", "20", "120", "--method", "quotient", "--exposure", "keep", "--keep-sky", "--fov", "60",
             "--threads", "1"]
-    assert main(["relight", str(photo), *args, "--no-denoise", "-o", str(tmp_path / "off.png")]) == 0
-    assert main(["relight", str(photo), *args, "-o", str(tmp_path / "on.png")]) == 0
+    assert main(["relight", str(photo), *args, "--denoise", "-o", str(tmp_path / "on.png")]) == 0
+    assert main(["relight", str(photo), *args, "-o", str(tmp_path / "off.png")]) == 0
     r = Relighter.load()
-    r.denoise = None
+    r.denoise = DENOISE
     img = (io.read_image(photo) * 255).round().astype(np.uint8)
     want = r.relight(img, sun_direction(20.0, 120.0), **kw)
-    off, on = io.read_image(tmp_path / "off.png"), io.read_image(tmp_path / "on.png")
-    assert np.abs(off - want).max() <= 1.0 / 255 + 1e-6
+    on, off = io.read_image(tmp_path / "on.png"), io.read_image(tmp_path / "off.png")
+    assert np.abs(on - want).max() <= 1.0 / 255 + 1e-6
     assert np.abs(off - on).mean() > 1e-3

@@ -207,11 +207,12 @@ def test_09_the_quotient_ratio_is_smoothed_at_the_relighters_radius(relighter, p
             Relighter(relighter.inverse, relighter.shadow_net, relighter.prior, relighter.res, ratio_radius=bad)
 
 
-def test_10_the_foreground_is_relit_from_the_denoised_photo_and_the_sky_stays_the_photos(relighter, photo) -> None:
-    """``Relighter.denoise`` (study 37): a noisy photo relit to its own lighting on the known track comes back as
-    the photo denoised by :func:`physrelight.denoise.denoise` at the Relighter's setting, bit for bit on the
-    foreground, nearer the clean photo than the noisy one was; its sky pixels stay the noisy photo's own. With
-    ``denoise = None`` the photo itself comes back, bit for bit."""
+def test_10_with_denoise_the_foreground_is_relit_from_the_denoised_photo_and_the_sky_stays_the_photos(relighter,
+                                                                                                      photo) -> None:
+    """``Relighter.denoise`` (study 37; off by default): a noisy photo relit to its own lighting on the known track
+    comes back as the photo denoised by :func:`physrelight.denoise.denoise` at :data:`learned.relighter.DENOISE`,
+    bit for bit on the foreground, nearer the clean photo than the noisy one was; its sky pixels stay the noisy
+    photo's own. Off (the default), the photo itself comes back, bit for bit."""
     from learned.relighter import DENOISE
     from physrelight.denoise import denoise
 
@@ -219,18 +220,18 @@ def test_10_the_foreground_is_relit_from_the_denoised_photo_and_the_sky_stays_th
     g = torch.Generator().manual_seed(5)
     noisy = (image + 0.02 * torch.randn(image.shape, generator=g)).clamp_min(0.0)
     source = _target(4)
-    assert relighter.denoise == DENOISE == (2, 3.0)
-    out = relighter.relight_full_resolution(noisy, sky, source, source_lighting=source, method="quotient",
+    assert relighter.denoise is None and DENOISE == (2, 3.0)
+    off = relighter.relight_full_resolution(noisy, sky, source, source_lighting=source, method="quotient",
                                             known_source=True)["relit"]
-    clean = denoise(noisy, *DENOISE)
-    fg = ~sky.expand_as(noisy)
-    assert torch.equal(out[fg], clean[fg]) and torch.equal(out[~fg], noisy[~fg])
-    assert float((out - image)[fg].abs().mean()) < float((noisy - image)[fg].abs().mean())
-    assert torch.equal(relighter.denoised(noisy), clean)
+    assert torch.equal(off, noisy) and relighter.denoised(noisy) is noisy
     try:
-        relighter.denoise = None
-        off = relighter.relight_full_resolution(noisy, sky, source, source_lighting=source, method="quotient",
-                                                known_source=True)["relit"]
-        assert torch.equal(off, noisy) and relighter.denoised(noisy) is noisy
-    finally:
         relighter.denoise = DENOISE
+        out = relighter.relight_full_resolution(noisy, sky, source, source_lighting=source, method="quotient",
+                                                known_source=True)["relit"]
+        clean = denoise(noisy, *DENOISE)
+        fg = ~sky.expand_as(noisy)
+        assert torch.equal(out[fg], clean[fg]) and torch.equal(out[~fg], noisy[~fg])
+        assert float((out - image)[fg].abs().mean()) < float((noisy - image)[fg].abs().mean())
+        assert torch.equal(relighter.denoised(noisy), clean)
+    finally:
+        relighter.denoise = None

@@ -225,13 +225,8 @@ def test_06_bad_arguments_fail_with_one_line(tmp_path, capsys) -> None:
 # runs/renderer_q; proposed now a learned gain on the quotient image, the sun by its exact cosine): proposed
 # 0.10418 -> 0.09673; the others within 0.00006 of their pins (left as they were). The same day proposed_known
 # (the renderer on the known track's quotient image) was added at its first figure, 0.08428.
-# Regenerated 2026-12-05 when the Relighter began to denoise the photo before relighting (Relighter.denoise =
-# (2, 3.0), physrelight.denoise, study 37; every learned method sees the denoised photo): proposed 0.09673 ->
-# 0.09434, proposed_known 0.08428 -> 0.08153, quotient 0.10135 -> 0.09874, quotient_known 0.08711 -> 0.08385,
-# lambertian_sh 0.10632 -> 0.10596, shadownet_lambertian 0.10395 -> 0.10378 (within the band, re-pinned with the
-# rest); the oracles unchanged.
-QUICK_L1_PINS = {"proposed": 0.09434, "proposed_known": 0.08153, "lambertian_sh": 0.10596, "shadownet_lambertian": 0.10378,
-                 "quotient": 0.09874, "quotient_known": 0.08385, "oracle_sh": 0.05557, "oracle_sh_shadow": 0.04682}
+QUICK_L1_PINS = {"proposed": 0.09673, "proposed_known": 0.08428, "lambertian_sh": 0.10632, "shadownet_lambertian": 0.10395,
+                 "quotient": 0.10135, "quotient_known": 0.08711, "oracle_sh": 0.05557, "oracle_sh_shadow": 0.04682}
 QUICK_L1_BAND = 0.0003
 
 
