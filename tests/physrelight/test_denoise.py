@@ -38,9 +38,45 @@ def test_02_the_estimate_recovers_gaussian_noise_through_edges(sigma: float) -> 
     g = torch.Generator().manual_seed(7)
     clean = _scene()
     noisy = clean + sigma * torch.randn(clean.shape, generator=g, dtype=torch.float64)
-    est = noise_sigma(noisy)
+    est = noise_sigma(noisy, block=None)
     se = 1.166 * sigma / math.sqrt(64 * 64)
     assert torch.all((est - sigma).abs() < 4 * se + 0.02 * sigma), (est, sigma)
+
+
+@pytest.mark.parametrize("sigma", [0.002, 0.01, 0.05])
+def test_02b_the_noise_floor_recovers_gaussian_noise_within_its_standard_error(sigma: float) -> None:
+    """The noise floor (16-px tiles, their 10th percentile, divided by its shortfall under pure noise) on the
+    same image: 64 tiles, each estimate with sd 1.166 sigma / 8; the sample quantile's sd is about
+    ``sqrt(q (1 - q) / T) / phi(z_q)`` times that (3 % of sigma here). Within 4 of those, plus 2 % for the edges."""
+    g = torch.Generator().manual_seed(7)
+    clean = _scene()
+    noisy = clean + sigma * torch.randn(clean.shape, generator=g, dtype=torch.float64)
+    est = noise_sigma(noisy)
+    q, tiles = 0.1, 64
+    phi = math.exp(-0.5 * 1.2816 ** 2) / math.sqrt(2 * math.pi)
+    sd = math.sqrt(q * (1 - q) / tiles) / phi * 1.166 / 8 * sigma
+    assert torch.all((est - sigma).abs() < 4 * sd + 0.02 * sigma), (est, sigma)
+
+
+def test_02c_texture_does_not_raise_the_noise_floor() -> None:
+    """Half the tiles carry pixel-scale texture 5 times the noise (as foliage does): Donoho's estimate over the
+    whole image reads it as noise, the noise floor still finds the noise in the flat tiles (within 15 %)."""
+    g = torch.Generator().manual_seed(2)
+    img = torch.full((1, 3, 128, 128), 0.3, dtype=torch.float64)
+    img[..., :, 64:] += 0.05 * torch.randn(1, 3, 128, 64, generator=g, dtype=torch.float64)  # texture
+    img += 0.01 * torch.randn(img.shape, generator=g, dtype=torch.float64)  # the noise
+    whole, floor = noise_sigma(img, block=None), noise_sigma(img)
+    assert torch.all(whole > 1.5 * 0.01), whole  # the texture read as noise: half again or more
+    assert torch.all((floor - 0.01).abs() < 0.0015), floor
+
+
+def test_02d_clipped_tiles_do_not_count() -> None:
+    """A clipped sky (1.0 exactly, no noise left) over half the photo: the floor comes from the other tiles."""
+    g = torch.Generator().manual_seed(4)
+    img = (0.3 + 0.01 * torch.randn(1, 3, 128, 128, generator=g, dtype=torch.float64))
+    img[..., :64, :] = 1.0
+    assert torch.all((noise_sigma(img) - 0.01).abs() < 0.0015)
+    assert torch.all(noise_sigma(img, block=None) < 0.005)  # the whole-image median sees the clipped half
 
 
 def test_03_a_clean_image_comes_back_unchanged() -> None:
@@ -87,6 +123,8 @@ def test_05_a_given_sigma_is_used_and_zero_means_untouched() -> None:
     (lambda: noise_sigma(torch.zeros(3, 8, 8)), "shape"),
     (lambda: noise_sigma(torch.zeros(1, 3, 1, 8)), "2 x 2"),
     (lambda: noise_sigma(torch.full((1, 3, 4, 4), float("nan"))), "NaN"),
+    (lambda: noise_sigma(torch.zeros(1, 3, 8, 8), block=5), "block"),
+    (lambda: noise_sigma(torch.zeros(1, 3, 8, 8), quantile=1.0), "quantile"),
     (lambda: denoise(torch.zeros(1, 3, 8, 8), 0), "radius"),
     (lambda: denoise(torch.zeros(1, 3, 8, 8), 1, 0.0), "strength"),
     (lambda: denoise(torch.zeros(1, 3, 8, 8), 1, 1.0, sigma=torch.zeros(3)), "sigma"),
