@@ -94,7 +94,7 @@ def noise_sigma(image: torch.Tensor, block: int | None = FLOOR_BLOCK, quantile: 
     return out
 
 
-def denoise(image: torch.Tensor, radius: int = 1, strength: float = 2.0,
+def denoise(image: torch.Tensor, radius: int = 1, strength: float = 2.0, block: int | None = FLOOR_BLOCK, *,
             sigma: torch.Tensor | None = None) -> torch.Tensor:
     """``(B, C, H, W)`` ``image`` with its noise averaged out where the image is flat at the noise's scale.
 
@@ -102,8 +102,9 @@ def denoise(image: torch.Tensor, radius: int = 1, strength: float = 2.0,
         image: ``(B, C, H, W)`` linear values.
         radius: the guided filter's window radius in pixels, >= 1.
         strength: the ridge in units of the noise: ``eps = (strength * sigma)^2`` per channel, > 0.
-        sigma: ``(B, C)`` the noise's standard deviation; None: :func:`noise_sigma` of ``image`` (its noise
-            floor).
+        block: :func:`noise_sigma`'s tile when it estimates the noise (None: the whole image, round 1 of
+            study 37).
+        sigma: ``(B, C)`` the noise's standard deviation; None: :func:`noise_sigma` of ``image``.
 
     Returns:
         ``(B, C, H, W)``; channels whose sigma is 0 come back unchanged.
@@ -118,7 +119,7 @@ def denoise(image: torch.Tensor, radius: int = 1, strength: float = 2.0,
         raise ValueError(f"strength must be a number > 0, got {strength!r}")
     b, c = image.shape[:2]
     if sigma is None:
-        sigma = noise_sigma(image)
+        sigma = noise_sigma(image, block)
     sigma = torch.as_tensor(sigma, dtype=image.dtype)
     if sigma.shape != (b, c) or bool((sigma < 0).any()) or not bool(torch.isfinite(sigma).all()):
         raise ValueError(f"sigma must be ({b}, {c}) finite values >= 0, got {tuple(sigma.shape)}")

@@ -8,6 +8,7 @@ for both targets and both methods.
 
     .venv/bin/python docs/experiments/scripts/37_denoise_probe.py data/val5 -o docs/experiments/results/37_denoise_val5.json
     .venv/bin/python docs/experiments/scripts/37_denoise_probe.py data/heldout --only off --only 2:3 -o docs/experiments/results/37_denoise_heldout.json
+    .venv/bin/python docs/experiments/scripts/37_denoise_probe.py data/val5 --round 2 -o docs/experiments/results/37_denoise_val5_round2.json
 """
 from __future__ import annotations
 
@@ -20,12 +21,14 @@ import torch
 
 from learned import Relighter
 from physrelight import io
+from physrelight.denoise import FLOOR_BLOCK
 from physrelight.stats import paired_bootstrap
 from validation.bench.data import load_dataset
 from validation.bench.protocols import cross_pairs
 from validation.bench.scores import score
 
 GRID = ("off", "1:1", "1:2", "1:3", "2:1", "2:2", "2:3")
+GRID_2 = ("off", "1:3", "1:4", "1:6", "2:3", "2:4", "2:6")
 
 
 def main() -> None:
@@ -33,6 +36,8 @@ def main() -> None:
     ap.add_argument("data")
     ap.add_argument("-o", "--out", required=True)
     ap.add_argument("--only", action="append", default=[], help="settings (default: the grid)")
+    ap.add_argument("--round", type=int, default=1, choices=(1, 2),
+                    help="1: the noise read over the whole photo and round 1's grid; 2: the noise floor, round 2's grid")
     args = ap.parse_args()
     torch.set_num_threads(2)
     t0 = time.time()
@@ -43,8 +48,9 @@ def main() -> None:
     r = Relighter.load()
     out = {"data": args.data, "pairs": {k: len(v) for k, v in sets.items()}, "settings": {}, "minus_off": {}}
     groups = {k: np.asarray([p.view.scene for p in v]) for k, v in sets.items()}
-    for setting in args.only or GRID:
-        r.denoise = None if setting == "off" else (int(setting.split(":")[0]), float(setting.split(":")[1]))
+    block = None if args.round == 1 else FLOOR_BLOCK
+    for setting in args.only or (GRID if args.round == 1 else GRID_2):
+        r.denoise = None if setting == "off" else (int(setting.split(":")[0]), float(setting.split(":")[1]), block)
         row = {}
         for name, pairs in sets.items():
             work: dict[tuple, dict] = {}

@@ -7,6 +7,7 @@ the noise the photo model drew, and the l1 (display values) of the photo and of 
 Writes a JSON and a PNG of the three crops the denoise changes most (photo left, denoised right, 3x).
 
     .venv/bin/python docs/experiments/scripts/37_denoise_real_crops.py -o docs/experiments/results/37_denoise_real_crops.json
+    .venv/bin/python docs/experiments/scripts/37_denoise_real_crops.py --setting R:K:16 -o docs/experiments/results/37_denoise_real_crops_round2.json
 """
 from __future__ import annotations
 
@@ -26,23 +27,31 @@ from real_crop_scores import bench_crops, crop_panoramas
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("-o", "--out", required=True)
+    ap.add_argument("--setting", default=None, help="RADIUS:STRENGTH:BLOCK (BLOCK 0: the whole photo); default: "
+                                                    "round 1's, DENOISE with the whole-photo estimate")
     args = ap.parse_args()
+    if args.setting is None:
+        setting = (*DENOISE[:2], None)
+    else:
+        rad, k, blk = args.setting.split(":")
+        setting = (int(rad), float(k), int(blk) or None)
     torch.set_num_threads(2)
     _, panos = crop_panoramas(False)
     rows, shown = [], []
     for _, c in bench_crops(panos):
         lin = c.linear()
-        dn = colour.to_ldr(denoise(lin, *DENOISE))[0].permute(1, 2, 0).numpy()
+        dn = colour.to_ldr(denoise(lin, *setting))[0].permute(1, 2, 0).numpy()
         photo = c.display()
         clean = colour.to_ldr(torch.from_numpy(c.radiance * c.gain.astype(np.float32)).permute(2, 0, 1)[None])
         clean = clean[0].permute(1, 2, 0).numpy()
         change = float(np.abs(dn - photo).mean())
-        rows.append({"crop": c.name, "sigma_read": float(noise_sigma(lin).mean()), "sigma_drawn": c.params.noise_sigma,
+        rows.append({"crop": c.name, "sigma_read": float(noise_sigma(lin, setting[2]).mean()),
+                     "sigma_drawn": c.params.noise_sigma,
                      "l1_photo_to_clean": float(np.abs(photo - clean).mean()),
                      "l1_denoised_to_clean": float(np.abs(dn - clean).mean()), "l1_change": change})
         shown.append((change, photo, dn))
     summary = {k: float(np.mean([r[k] for r in rows])) for k in rows[0] if k != "crop"}
-    io.write_json(args.out, {"denoise": list(DENOISE), "crops": rows, "mean": summary})
+    io.write_json(args.out, {"denoise": list(setting), "crops": rows, "mean": summary})
     print({k: round(v, 4) for k, v in summary.items()})
     shown.sort(key=lambda t: -t[0])
     strips = [np.concatenate([p, d], 1) for _, p, d in shown[:3]]
