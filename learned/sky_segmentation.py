@@ -420,9 +420,19 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor,
     return torch.cat(masks), reasons
 
 
+_DILATE_POOL_MAX = 16
+
+
 def _dilate(mask: torch.Tensor, r: int) -> torch.Tensor:
-    """``mask (B, 1, H, W)`` bool dilated by a ``(2r+1)^2`` square: separable, so a wide ``r`` stays cheap."""
+    """``mask (B, 1, H, W)`` bool dilated by a ``(2r+1)^2`` square. A small ``r`` by two separable max pools;
+    a wide one (the colour band of a large photo: hundreds of pixels) by the window's count of mask pixels
+    (a pixel is in the dilation when its window holds any), whose summed-area tables cost the same at any
+    ``r`` (a max pool's cost grows with it). Counts are integers, exact in float64."""
+    from physrelight.guided_filter import box_filter
+
     r = min(r, max(mask.shape[-2:]))
+    if r > _DILATE_POOL_MAX:
+        return box_filter(mask.to(torch.float64), r) > 0
     m = F.max_pool2d(mask.float(), (1, 2 * r + 1), stride=1, padding=(0, r))
     return F.max_pool2d(m, (2 * r + 1, 1), stride=1, padding=(r, 0)) > 0.5
 
