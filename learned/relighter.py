@@ -448,9 +448,8 @@ class Relighter:
             "albedo", "normals", "shadow", "lighting", "foreground")}}
 
     def denoised(self, image: torch.Tensor) -> torch.Tensor:
-        """``(B, 3, H, W)`` linear ``image`` with its sensor noise averaged out by :attr:`denoise`
-        (:func:`physrelight.denoise.denoise`; the image itself when :attr:`denoise` is None): what the
-        foreground is relit from."""
+        """``(B, 3, H, W)`` linear ``image`` smoothed by :func:`physrelight.denoise.denoise` at :attr:`denoise`
+        (the image itself when :attr:`denoise` is None, the default): what the foreground is relit from."""
         if self.denoise is None:
             return image
         from physrelight.denoise import denoise

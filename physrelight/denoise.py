@@ -3,7 +3,9 @@
 Why. Quotient relighting multiplies the photo (:mod:`physrelight.quotient`), so whatever the photo
 carries that is not scene radiance comes along: its sensor noise most of all. On a dark photo brought
 up by the exposure the noise is multiplied too. Removing it before relighting is physics, not
-cosmetics: the relit photo should be the radiance under the new light, and that has no noise.
+cosmetics: the relit photo should be the radiance under the new light, and that has no noise. But a
+photo's fine texture and its noise are hard to tell apart, so the relighting uses this only when asked
+(``Relighter.denoise``, ``relight --denoise``; study 37 measured it smoothing real foliage).
 
 Noise level (:func:`noise_sigma`). Donoho's estimate: the median absolute value of the finest diagonal
 Haar wavelet coefficients, over 0.6745 (the median absolute value of a unit Gaussian). Each coefficient
@@ -32,7 +34,7 @@ import torch
 
 from physrelight.guided_filter import guided_filter
 
-__all__ = ["FLOOR_BLOCK", "FLOOR_QUANTILE", "MAD_TO_SIGMA", "denoise", "noise_sigma"]
+__all__ = ["CLIP_HIGH", "FLOOR_BLOCK", "FLOOR_QUANTILE", "MAD_TO_SIGMA", "denoise", "noise_sigma"]
 
 MAD_TO_SIGMA = 1.0 / 0.6745
 """The median absolute value of a zero-mean Gaussian is 0.6745 of its standard deviation."""
@@ -41,6 +43,7 @@ FLOOR_BLOCK = 16
 FLOOR_QUANTILE = 0.1
 """The quantile of the tiles' estimates that :func:`noise_sigma`'s noise floor takes."""
 CLIP_HIGH = 0.98
+"""A tile with a value at or above this (linear, a photo's white) is clipped: the noise floor leaves it out."""
 _MEDIAN_SD = 1.166  # sd of Donoho's estimate from n coefficients of pure noise, times sqrt(n) / sigma
 
 
@@ -72,9 +75,8 @@ def noise_sigma(image: torch.Tensor, block: int | None = FLOOR_BLOCK, quantile: 
     h, w = (image.shape[-2] // 2) * 2, (image.shape[-1] // 2) * 2
     x = image[..., :h, :w]
     hh = ((x[..., 0::2, 0::2] - x[..., 0::2, 1::2] - x[..., 1::2, 0::2] + x[..., 1::2, 1::2]) / 2.0).abs()
-    whole = hh.flatten(2).median(-1).values * MAD_TO_SIGMA
     if block is None or h < block or w < block:
-        return whole
+        return hh.flatten(2).median(-1).values * MAD_TO_SIGMA
     k = block // 2  # coefficients per tile side
     th, tw = hh.shape[-2] // k, hh.shape[-1] // k
     b, c = hh.shape[:2]
