@@ -40,16 +40,13 @@ def _window_sums(x: torch.Tensor, radius: int, dim: int) -> torch.Tensor:
     n = x.shape[dim]
     c = torch.cumsum(x, dim=dim)
     zero = torch.zeros_like(c.narrow(dim, 0, 1))
-    c = torch.cat([zero, c], dim=dim)  # c[k] = sum of the first k, k = 0..n
+    c = torch.cat([zero, c], dim=dim).movedim(dim, -1)  # c[..., k] = sum of the first k, k = 0..n
     # c[min(i + r + 1, n)] - c[max(i - r, 0)] for i = 0..n-1, by slicing (index_select is several times slower):
-    # the upper ends run past n for the last r + 1 windows and repeat c[n]; the lower ends start at 0 for the first r.
+    # the last r upper ends repeat c[n], the first r lower ends are c[0] = 0.
     r = min(radius, n)
-    upper = torch.cat([c.narrow(dim, min(r + 1, n), n + 1 - min(r + 1, n)),
-                       c.narrow(dim, n, 1).expand(*[-1 if d != dim % c.ndim else n - (n + 1 - min(r + 1, n))
-                                                    for d in range(c.ndim)])], dim=dim)
-    lower = torch.cat([zero.expand(*[-1 if d != dim % c.ndim else r for d in range(c.ndim)]),
-                       c.narrow(dim, 0, n - r)], dim=dim)
-    return upper - lower
+    upper = torch.cat([c[..., r + 1:], c[..., -1:].expand(*c.shape[:-1], r)], dim=-1)
+    lower = torch.cat([c[..., :1].expand(*c.shape[:-1], r), c[..., : n - r]], dim=-1)
+    return (upper - lower).movedim(-1, dim)
 
 
 _POOL_MAX_RADIUS = 16
