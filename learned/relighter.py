@@ -192,6 +192,12 @@ class Relighter:
         # helps the synthetic bench but its noise estimate reads pixel-scale texture as noise, and real foliage
         # loses its texture (study 37).
         self.denoise: tuple[int, float] | None = None
+        # Estimated track with a given source level (relight_linear's source_lighting): the weight of the grey
+        # world in the relit level. The estimated lighting's shape, put at the given level, says how much light
+        # falls on the visible surfaces; so does the photo's brightness under a middle-grey albedo. The level
+        # used is the geometric blend: exponent 0 (the default), the shape alone; 1, the grey world alone
+        # (learned.source_lighting.grey_world_level; study 39).
+        self.level_prior = 0.0
 
     @property
     def renderer_base(self) -> str | None:
@@ -406,6 +412,8 @@ class Relighter:
             raise ValueError(f"known_source is a track of the quotient methods and of a quotient-based renderer, "
                              f"not of {method!r}")
         scale = exposure_scale(tgt, out["lighting"], source, fallback=self.prior.mean.reshape(1, 9, 3))[:, None, None]
+        if source is not None and not known_source and self.level_prior:
+            scale = scale / self.grey_world_gain(image, sky, out, scale) ** self.level_prior
         tgt = tgt * scale
         if method == "lambertian_sh" or method == "quotient":
             s = torch.ones_like(out["shadow"])
@@ -446,6 +454,22 @@ class Relighter:
         relit = torch.where(sky, image.float(), relit.clamp_min(0))
         return {"relit": relit, "target": tgt, "target_shadow": s, **{k: out[k] for k in (
             "albedo", "normals", "shadow", "lighting", "foreground")}}
+
+    @staticmethod
+    def grey_world_gain(image: torch.Tensor, sky: torch.Tensor, decomposition: dict[str, torch.Tensor],
+                        scale: torch.Tensor) -> torch.Tensor:
+        """``(B, 1, 1)`` the foreground's median implied albedo over middle grey, with the estimated lighting's
+        shape at the given source level.
+
+        ``decomposition["lighting"] / scale`` is the estimate in the given source's units (``scale`` from
+        :func:`exposure_scale`, ``(B, 1, 1)``); the implied albedo is ``lum(image) / lum(shading(n; that))``
+        (:func:`learned.source_lighting.grey_world_level`). Above 1, the photo is brighter than a middle-grey
+        scene under that lighting would be: more light falls on the visible surfaces than the estimated shape
+        puts there. ``image (B, 3, H, W)`` linear, ``sky (B, 1, H, W)`` bool.
+        """
+        g = grey_world_level(image.float(), decomposition["normals"], decomposition["lighting"] / scale,
+                             ~sky.bool())
+        return g.to(scale.dtype)[:, None, None]
 
     def denoised(self, image: torch.Tensor) -> torch.Tensor:
         """``(B, 3, H, W)`` linear ``image`` smoothed by :func:`physrelight.denoise.denoise` at :attr:`denoise`
