@@ -412,6 +412,8 @@ class Relighter:
             raise ValueError(f"known_source is a track of the quotient methods and of a quotient-based renderer, "
                              f"not of {method!r}")
         scale = exposure_scale(tgt, out["lighting"], source, fallback=self.prior.mean.reshape(1, 9, 3))[:, None, None]
+        if not 0.0 <= self.level_prior <= 1.0:
+            raise ValueError(f"level_prior must lie in [0, 1], got {self.level_prior!r}")
         if source is not None and not known_source and self.level_prior:
             scale = scale / self.grey_world_gain(image, sky, out, scale) ** self.level_prior
         tgt = tgt * scale

@@ -235,3 +235,57 @@ def test_10_with_denoise_the_foreground_is_relit_from_the_denoised_photo_and_the
         assert torch.equal(relighter.denoised(noisy), clean)
     finally:
         relighter.denoise = None
+
+
+def test_11_the_level_prior_blends_the_shapes_level_with_the_grey_world(photo) -> None:
+    """``Relighter.level_prior`` (study 39; 0 by default): on the estimated track with a given source level, the
+    target's scale is divided by ``g ** beta``, ``g`` the foreground's median implied albedo over 0.18 under the
+    estimated shape at the given level (computed here by hand from its definition). beta = 1 is the target
+    divided by ``g`` at beta = 0; beta = 1/2 the same with ``sqrt(g)``; photo, source and target scaled together
+    scale the output alike (the blend is exposure-equivariant); the known track ignores it; a weight outside
+    [0, 1] is refused by name."""
+    from learned import Relighter
+    from physrelight import colour
+
+    r = Relighter.load(ratio_radius=0)
+    assert r.level_prior == 0.0
+    image, sky = photo
+    source, target = _target(4), _target(3)
+    dec = r.decompose_linear(image, sky)
+    fg = ~sky.expand_as(image)
+
+    def relit(beta: float, k: float = 1.0, tgt: torch.Tensor = target, **kw) -> torch.Tensor:
+        r.level_prior = beta
+        try:
+            return r.relight_linear(k * image, sky, k * tgt, source_lighting=k * source, method="quotient",
+                                    decomposition=dec, **kw)["relit"]
+        finally:
+            r.level_prior = 0.0
+
+    # g by hand: the estimate put at the given source's DC luminance, the median of lum(photo) / lum(shading)
+    lum = torch.tensor(colour.LUMINANCE, dtype=torch.float64)
+    at_given = dec["lighting"].double() * ((source[0].double() @ lum) / (dec["lighting"][:, 0].double() @ lum))[:, None,
+                                                                                                               None]
+    shade = torch.einsum("bchw,c->bhw", image_model.shading(dec["normals"].double(), at_given), lum)
+    y = torch.einsum("bchw,c->bhw", image.double(), lum)
+    g = torch.stack([torch.median(y[i][~sky[i, 0]] / shade[i][~sky[i, 0]]) / 0.18 for i in range(2)])
+    assert float((g - 1).abs().min()) > 0.2  # the blend moves the level here
+    for i in range(2):
+        one = {k: v[i:i + 1] for k, v in dec.items()}
+        for beta in (0.5, 1.0):
+            r.level_prior = beta
+            got = r.relight_linear(image[i:i + 1], sky[i:i + 1], target, source_lighting=source, method="quotient",
+                                   decomposition=one)["relit"]
+            r.level_prior = 0.0
+            want = r.relight_linear(image[i:i + 1], sky[i:i + 1], target / float(g[i]) ** beta, source_lighting=source,
+                                    method="quotient", decomposition=one)["relit"]
+            torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-8)
+    rh = relit(0.5)
+    assert torch.equal(rh[~fg], image[~fg])
+    torch.testing.assert_close(relit(0.5, k=4.0), 4.0 * rh, rtol=1e-5, atol=1e-7)
+    assert torch.equal(relit(1.0, known_source=True), relit(0.0, known_source=True))
+    for bad in (-0.1, 1.5):
+        r.level_prior = bad
+        with pytest.raises(ValueError, match="level_prior"):
+            r.relight_linear(image, sky, target, source_lighting=source, method="quotient", decomposition=dec)
+    r.level_prior = 0.0
