@@ -230,6 +230,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from physrelight.cli_common import number_in, positive_int, positive_number
 
     from .relighter import RELIGHT_METHODS, SKY_SOURCES, SKY_TYPES
+    from .sky_segmentation import GROW_REACH
 
     p = sub.add_parser("relight", help="relight one outdoor photo to a new lighting (shipped weights)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -256,9 +257,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--azimuth", type=float, default=0.0, help="turn the target about the vertical (degrees)")
     p.add_argument("--mask", default=None, help="sky mask PNG (white = sky), the photo's size "
                                                 "(default: the shipped sky segmenter's)")
-    p.add_argument("--sky-grow", type=number_in(0.0, 1.0, "a fraction of the photo's short side"), default=0.0,
+    p.add_argument("--sky-grow", type=number_in(0.0, 1.0, "a fraction of the photo's short side"), default=GROW_REACH,
                    metavar="FRAC", help="also call sky the sky-coloured pixels within FRAC of the short side of the "
-                                        "found sky: lattices, bare branches (default: 0, off; docs/experiments/28)")
+                                        f"found sky: lattices, bare branches (default: {GROW_REACH}; 0: off; "
+                                        "docs/experiments/40)")
     p.add_argument("--denoise", action="store_true",
                    help="smooth the photo's noise before relighting, at a level estimated from the photo (off by "
                         "default: it also smooths fine texture such as foliage; for dark, noisy photos; "

@@ -36,6 +36,7 @@ from physrelight.sky_model import FIT_GLOW_EXPONENT, horizon_clamped, sun_disc
 from . import checkpoint as ckpt
 from .lighting import WEIGHTS_DIR, load_prior
 from .networks import InverseNet, ShadowNet, repair_top_rows
+from .sky_segmentation import GROW_REACH
 from .objectives import decompose_and_solve
 from .source_lighting import SourceLightingConfig, grey_world_level, solve_source_lighting
 
@@ -172,8 +173,9 @@ class Relighter:
         # ratio, the figures before study 27): physrelight.quotient.smooth_ratio.
         self.ratio_radius = int(ratio_radius)
         # The segmenter's sky is grown by sky-coloured pixels within this fraction of the short side
-        # (learned.sky_segmentation.grow_sky_by_colour); 0, off, by default (study 28).
-        self.sky_grow = 0.0
+        # (learned.sky_segmentation.grow_sky_by_colour): the sky between a lattice's bars (GROW_REACH, study 40;
+        # 0: off, the masks before).
+        self.sky_grow = GROW_REACH
         # SkyGAN's sky is blurred within the mask by a Gaussian of this fraction of the short side
         # (learned.sky_gan.smooth_sky; None: SMOOTH_SIGMA, 1/8; 0: SkyGAN's own sky; study 31).
         self.sky_smooth: float | None = None

@@ -189,18 +189,21 @@ def test_07_the_rocket_has_a_sky_and_its_towers_stay(relighter) -> None:
 
 
 def test_07b_the_relighters_sky_grow_reaches_the_mask(relighter) -> None:
-    """``Relighter.sky_grow`` (``relight --sky-grow``) is handed to the mask: on the rocket it adds the
-    dusk sky inside the right-hand tower's lattice and keeps every pixel of the default mask."""
+    """``Relighter.sky_grow`` (``relight --sky-grow``; :data:`GROW_REACH` = 0.1 by default since study 40) is
+    handed to the mask: on the rocket it adds the dusk sky inside the towers' lattices and keeps every pixel of
+    the mask without growth (``sky_grow = 0``)."""
     skimage = pytest.importorskip("skimage")
     from learned.relighter import Relighter
+    from learned.sky_segmentation import GROW_REACH
 
+    assert relighter.sky_grow == GROW_REACH == 0.1
     lin = colour.from_ldr(torch.from_numpy(skimage.data.rocket()).permute(2, 0, 1)[None].float() / 255)
-    base, _ = Relighter.photo_sky(relighter, lin)
-    relighter.sky_grow = 0.1
+    grown, why = Relighter.photo_sky(relighter, lin)
+    relighter.sky_grow = 0.0
     try:
-        grown, why = Relighter.photo_sky(relighter, lin)
+        base, _ = Relighter.photo_sky(relighter, lin)
     finally:
-        relighter.sky_grow = 0.0
+        relighter.sky_grow = GROW_REACH
     assert why == "" and bool(grown[base].all())
     w = lin.shape[-1]
     right = (slice(None), slice(None), slice(None), slice(int(0.85 * w), w))
