@@ -155,3 +155,27 @@ def test_05_denoise_is_the_relighters_option(photo: Path, tmp_path: Path) -> Non
     want = r.relight((io.read_image(noisy) * 255).round().astype(np.uint8), sun_direction(20.0, 120.0), **kw)
     assert np.abs(on - want).max() <= 1.0 / 255 + 1e-6
     assert np.abs(off - on).mean() > 1e-3
+
+
+def test_06_a_large_photo_shows_its_stages_and_quiet_shows_nothing(photo: Path, tmp_path: Path, capsys,
+                                                                  monkeypatch) -> None:
+    """A single relighting of a photo of ``PROGRESS_PIXELS`` or more shows a bar on stderr that steps through
+    ``RELIGHT_STAGES`` to the end (lowered here to this small photo's size); ``--quiet`` shows none, and neither does
+    a smaller photo. The picture is the same either way, and the relighter's stage hook is taken off afterwards."""
+    from learned import relight_cli
+    from learned.relighter import RELIGHT_STAGES, Relighter
+
+    base = ["relight", str(photo), "--env", str(FOREST), "--threads", "1"]
+    assert main(base + ["-o", str(tmp_path / "small.png")]) == 0
+    assert "stage" not in capsys.readouterr().err  # 52 x 76 is under a megapixel
+    monkeypatch.setattr(relight_cli, "PROGRESS_PIXELS", 52 * 76)
+    seen: list[Relighter] = []
+    load = Relighter.load
+    monkeypatch.setattr(Relighter, "load", classmethod(lambda cls, *a, **k: seen.append(load(*a, **k)) or seen[-1]))
+    assert main(base + ["-o", str(tmp_path / "big.png")]) == 0
+    err = capsys.readouterr().err
+    assert f"{len(RELIGHT_STAGES)}/{len(RELIGHT_STAGES)}" in err and RELIGHT_STAGES[-1] in err
+    assert seen[-1].on_stage is None
+    assert main(base + ["-o", str(tmp_path / "quiet.png"), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
+    assert np.array_equal(io.read_image(tmp_path / "big.png"), io.read_image(tmp_path / "small.png"))

@@ -289,3 +289,24 @@ def test_11_the_level_prior_blends_the_shapes_level_with_the_grey_world(photo) -
         with pytest.raises(ValueError, match="level_prior"):
             r.relight_linear(image, sky, target, source_lighting=source, method="quotient", decomposition=dec)
     r.level_prior = 0.0
+
+
+def test_12_the_stage_hook_hears_each_stage_in_order(relighter, photo) -> None:
+    """``Relighter.on_stage`` is told ``RELIGHT_STAGES`` in order: all four for ``relight_layers``, the first three
+    for ``relight``, and for a sequence the sky mask once, then relighting and sky per frame."""
+    from learned.relighter import RELIGHT_STAGES
+
+    image, sky = photo
+    heard: list[str] = []
+    relighter.on_stage = heard.append
+    try:
+        relighter.relight_layers(image[:1], _target(3), sky_mask=sky[:1, 0])
+        assert tuple(heard) == RELIGHT_STAGES
+        heard.clear()
+        relighter.relight(image[:1], _target(3), sky_mask=sky[:1, 0])
+        assert tuple(heard) == RELIGHT_STAGES[:3]
+        heard.clear()
+        relighter.relight_sequence(image[:1], _target(3), [0.0, 90.0, 180.0], sky_mask=sky[:1, 0])
+        assert heard == ["sky mask"] + ["relighting", "sky"] * 3
+    finally:
+        relighter.on_stage = None
