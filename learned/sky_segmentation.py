@@ -489,6 +489,29 @@ def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int) -> torch.Tenso
     return ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
 
 
+def _local_gaussian_nll_at(x: torch.Tensor, w: torch.Tensor, r: int, index: torch.Tensor) -> torch.Tensor:
+    """:func:`_local_gaussian_nll` at the flat pixel indices ``index (N,)`` only: ``(N,)``.
+
+    The windows' sums are read from summed-area tables (four look-ups per pixel), so the cost does not grow with
+    ``r`` and the statistics are computed only where they are asked for (the growth asks at its few candidates,
+    while a window of ``4 * reach`` spans most of a large photo). ``x (1, C, H, W)``, ``w (1, 1, H, W)``."""
+    c, h, wd = x.shape[1], x.shape[-2], x.shape[-1]
+    planes = torch.cat([w[0], (x * w)[0], (x * x * w)[0]])  # (1 + 2C, H, W)
+    sat = F.pad(planes.cumsum(1).cumsum(2), (1, 0, 1, 0))
+    iy, ix = index // wd, index % wd
+    y0, y1 = (iy - r).clamp_min(0), (iy + r + 1).clamp_max(h)
+    x0, x1 = (ix - r).clamp_min(0), (ix + r + 1).clamp_max(wd)
+    sums = sat[:, y1, x1] - sat[:, y0, x1] - sat[:, y1, x0] + sat[:, y0, x0]  # (1 + 2C, N)
+    n, s1, s2 = sums[0], sums[1: 1 + c], sums[1 + c:]
+    total = planes.sum((1, 2))
+    near = n > 0
+    mu = torch.where(near, s1 / n.clamp_min(1e-12), (total[1: 1 + c] / total[0])[:, None])
+    m2 = torch.where(near, s2 / n.clamp_min(1e-12), (total[1 + c:] / total[0])[:, None])
+    var = (m2 - mu * mu).clamp_min(0) + VARIANCE_FLOOR
+    v = x[0].reshape(c, -1)[:, index]
+    return ((v - mu) ** 2 / var + torch.log(var)).sum(0)
+
+
 GROW_REACH = 0.1
 """How far from the mask (a fraction of the photo's short side) :func:`sky_mask_full_resolution` lets
 :func:`grow_sky_by_colour` add sky-coloured pixels; 0: not at all. The segmenter draws a lattice tower, power
@@ -595,7 +618,11 @@ def grow_sky_by_colour(sky: torch.Tensor, image: torch.Tensor, reach: int, chi2:
     pred = torch.einsum("khw,kc->chw", basis, coef) + med[:, None, None]
     maha = (((x - pred) / sigma[:, None, None]) ** 2).sum(0)
     d_sky = maha + 2 * torch.log(sigma).sum()
-    # a candidate is itself non-sky, so the local Gaussian of the non-sky pixels is always defined there
-    d_fg = _local_gaussian_nll(x[None], (~sky).to(torch.float64), max(4, 4 * reach))[0, 0]
-    grow = cand & (maha < chi2) & (d_sky < d_fg)
-    return sky | grow[None, None]
+    # only the candidates with the sky's colour need the local Gaussian of the non-sky pixels around them (a
+    # candidate is itself non-sky, so it is always defined there)
+    ask = torch.nonzero((cand & (maha < chi2)).flatten()).squeeze(1)
+    grow = torch.zeros(h * w, dtype=torch.bool)
+    if ask.numel():
+        d_fg = _local_gaussian_nll_at(x[None], (~sky).to(torch.float64), max(4, 4 * reach), ask)
+        grow[ask] = d_sky.flatten()[ask] < d_fg
+    return sky | grow.reshape(1, 1, h, w)

@@ -393,6 +393,24 @@ def test_04c_the_sky_inside_a_lattice_is_grown_back_by_its_colour() -> None:
     assert not bool(short[holes & (torch.arange(96) >= 40)[None, :] & (torch.arange(96) < 56)[None, :]].any())
 
 
+def test_04e_the_growths_local_gaussian_at_its_candidates_is_the_whole_images() -> None:
+    """The growth reads the local Gaussian of the non-sky pixels only at its candidates, from summed-area tables
+    (``_local_gaussian_nll_at``): equal to the whole-image box-filter version (``_local_gaussian_nll``) at every
+    pixel, for windows narrower and wider than the image, near its edges and where no weighted pixel is near."""
+    from learned.sky_segmentation import _local_gaussian_nll, _local_gaussian_nll_at
+
+    g = torch.Generator().manual_seed(3)
+    for h, w, r, density in ((40, 60, 3, 0.4), (64, 96, 17, 0.4), (120, 80, 40, 0.05), (50, 50, 200, 0.4),
+                             (30, 70, 2, 0.01)):
+        x = torch.randn(1, 3, h, w, generator=g, dtype=torch.float64)
+        wt = (torch.rand(1, 1, h, w, generator=g) < density).double()
+        full = _local_gaussian_nll(x, wt, r)[0, 0].flatten()
+        at = _local_gaussian_nll_at(x, wt, r, torch.arange(h * w))
+        torch.testing.assert_close(at, full, rtol=1e-10, atol=1e-10)
+        some = torch.randperm(h * w, generator=g)[:17]
+        torch.testing.assert_close(_local_gaussian_nll_at(x, wt, r, some), full[some], rtol=1e-10, atol=1e-10)
+
+
 def test_04d_the_growth_neither_extrapolates_the_sky_nor_trusts_a_mixed_mask() -> None:
     """(a) A ground whose colour is the sky's gradient carried on below the horizon is added when the
     sky model is extrapolated, and not when it is clamped to the fitted pixels (the default).
