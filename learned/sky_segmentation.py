@@ -29,7 +29,7 @@ from .data import resize_short_side
 from .networks import UNet
 
 __all__ = ["DUSK_SKY", "SEGMENT_RES", "WIDE_AUGMENT", "SkySegmenter", "dusk_sky", "grow_sky_by_colour", "jpeg_like", "label_components", "load_sky_segmenter", "photometric_augment", "plausible_sky",
-           "refine_sky_boundary", "segment_sky", "sky_mask_full_resolution", "sky_probability"]
+           "refine_sky_boundary", "segment_sky", "sky_colour_model", "sky_mask_full_resolution", "sky_probability"]
 
 _LUMA = colour.LUMINANCE
 
@@ -545,6 +545,49 @@ def _sky_basis(h: int, w: int, dtype: torch.dtype, order: int = 2,
     return torch.stack(terms)
 
 
+def sky_colour_model(sky: torch.Tensor, image: torch.Tensor, order: int = 2,
+                     clamp: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+    """The smooth model of a sky's colour that :func:`grow_sky_by_colour` fits: per channel, log RGB as a
+    polynomial of degree ``order`` in the pixel position, least squares over the mask's pixels at least
+    ``GROW_ERODE`` px inside it, refitted once without the 3-sigma outliers.
+
+    Args:
+        sky: ``(1, 1, H, W)`` bool. image: ``(1, 3, H, W)`` linear. order: 1 or 2.
+        clamp: evaluate the model only inside the fitted pixels' bounding box (no extrapolation).
+
+    Returns:
+        ``(x, pred, sigma)``: the photo's log RGB ``(3, H, W)`` and the model's prediction ``(3, H, W)`` (float64),
+        and its spread per channel ``(3,)`` (the residuals' MAD scaled to a standard deviation, at least
+        ``sqrt(VARIANCE_FLOOR)``); None when fewer than 64 pixels lie inside the mask, it covers everything, or
+        fewer than 16 survive the outlier test.
+    """
+    h, w = sky.shape[-2:]
+    x = torch.log(image.clamp_min(1e-4)).to(torch.float64)[0]  # (3, H, W)
+    sure = ~_dilate(~sky, GROW_ERODE)[0, 0]
+    if int(sure.sum()) < 64 or bool(sure.all()):
+        return None
+    idx = torch.nonzero(sure.flatten()).squeeze(1)
+    basis = _sky_basis(h, w, torch.float64, order)
+    if clamp:
+        uv = basis[1:3].reshape(2, -1)[:, idx]
+        box = (float(uv[0].min()), float(uv[0].max()), float(uv[1].min()), float(uv[1].max()))
+        basis = _sky_basis(h, w, torch.float64, order, box)
+    if idx.numel() > _GROW_MAX_FIT:  # an even, deterministic subsample keeps the fit cheap
+        idx = idx[torch.linspace(0, idx.numel() - 1, _GROW_MAX_FIT).round().long()]
+    a = basis.reshape(basis.shape[0], -1)[:, idx].T  # (N, K)
+    y = x.reshape(3, -1)[:, idx].T  # (N, 3)
+    keep = torch.ones(a.shape[0], dtype=torch.bool)
+    for _ in range(2):
+        coef = torch.linalg.lstsq(a[keep], y[keep]).solution  # (K, 3)
+        res = y - a @ coef
+        med = res[keep].median(0).values
+        sigma = (1.4826 * (res[keep] - med).abs().median(0).values).clamp_min(math.sqrt(VARIANCE_FLOOR))
+        keep = ((res - med).abs() <= 3 * sigma).all(1)
+        if int(keep.sum()) < 16:
+            return None
+    return x, torch.einsum("khw,kc->chw", basis, coef) + med[:, None, None], sigma
+
+
 def grow_sky_by_colour(sky: torch.Tensor, image: torch.Tensor, reach: int, chi2: float = GROW_CHI2,
                        order: int = 2, clamp: bool = True, max_spread: float | None = None) -> torch.Tensor:
     """Add the pixels that have the sky's colour where the sky would be, near the mask.
@@ -588,34 +631,15 @@ def grow_sky_by_colour(sky: torch.Tensor, image: torch.Tensor, reach: int, chi2:
     if reach == 0:
         return sky
     h, w = sky.shape[-2:]
-    x = torch.log(image.clamp_min(1e-4)).to(torch.float64)[0]  # (3, H, W)
-    sure = ~_dilate(~sky, GROW_ERODE)[0, 0]
-    n_sure = int(sure.sum())
     cand = (_dilate(sky, reach) & ~sky)[0, 0]
-    if n_sure < 64 or not bool(cand.any()) or bool(sure.all()):
+    if not bool(cand.any()):
         return sky
-    idx = torch.nonzero(sure.flatten()).squeeze(1)
-    basis = _sky_basis(h, w, torch.float64, order)
-    if clamp:
-        uv = basis[1:3].reshape(2, -1)[:, idx]
-        box = (float(uv[0].min()), float(uv[0].max()), float(uv[1].min()), float(uv[1].max()))
-        basis = _sky_basis(h, w, torch.float64, order, box)
-    if idx.numel() > _GROW_MAX_FIT:  # an even, deterministic subsample keeps the fit cheap
-        idx = idx[torch.linspace(0, idx.numel() - 1, _GROW_MAX_FIT).round().long()]
-    a = basis.reshape(basis.shape[0], -1)[:, idx].T  # (N, K)
-    y = x.reshape(3, -1)[:, idx].T  # (N, 3)
-    keep = torch.ones(a.shape[0], dtype=torch.bool)
-    for _ in range(2):
-        coef = torch.linalg.lstsq(a[keep], y[keep]).solution  # (K, 3)
-        res = y - a @ coef
-        med = res[keep].median(0).values
-        sigma = (1.4826 * (res[keep] - med).abs().median(0).values).clamp_min(math.sqrt(VARIANCE_FLOOR))
-        keep = ((res - med).abs() <= 3 * sigma).all(1)
-        if int(keep.sum()) < 16:
-            return sky
+    model = sky_colour_model(sky, image, order, clamp)
+    if model is None:
+        return sky
+    x, pred, sigma = model
     if max_spread is not None and float(sigma.max()) > max_spread:
         return sky
-    pred = torch.einsum("khw,kc->chw", basis, coef) + med[:, None, None]
     maha = (((x - pred) / sigma[:, None, None]) ** 2).sum(0)
     d_sky = maha + 2 * torch.log(sigma).sum()
     # only the candidates with the sky's colour need the local Gaussian of the non-sky pixels around them (a
