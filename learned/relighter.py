@@ -37,8 +37,8 @@ from physrelight.sky_model import FIT_GLOW_EXPONENT, horizon_clamped, sun_disc
 from . import checkpoint as ckpt
 from .lighting import WEIGHTS_DIR, load_prior
 from .networks import InverseNet, ShadowNet, repair_top_rows
-from .sky_segmentation import GROW_REACH
 from .objectives import decompose_and_solve
+from .sky_segmentation import GROW_REACH
 from .source_lighting import SourceLightingConfig, grey_world_level, solve_source_lighting
 
 DEFAULT_METHOD = "proposed"
