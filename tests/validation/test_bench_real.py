@@ -56,6 +56,17 @@ def test_02_the_ceilings_are_ceilings(quick) -> None:
     assert all(c["self"] is None or (c["self"]["identity"]["l1"] == 0.0
                                      and c["self"]["identity"]["psnr"] == pytest.approx(real.PSNR_CAP)) for c in crops)
     assert all(c["sky"] == {} for c in crops if c["stratum"] == "no_sky")
+    # (d) at each output's best single gain: never worse than as it is (the search starts from the least-squares
+    # gain and minimises this l1), the identity and the known-source quotient still exact
+    with_self = [c["self"] for c in crops if c["self"] is not None]
+    assert with_self
+    for rows in with_self:
+        assert rows["identity"]["l1_at_best_gain"] == 0.0
+        assert rows["quotient_known"]["l1_at_best_gain"] < 1e-4
+        for m in real.SELF_METHODS:
+            assert rows[m]["l1_at_best_gain"] <= rows[m]["l1"] + 1e-4, m
+    md = (quick / "real.md").read_text()
+    assert "after each output's best single gain" in md
 
 
 def test_03_shading_error_is_scale_invariant_and_sees_direction() -> None:

@@ -117,39 +117,11 @@ class Pair:
         return torch.from_numpy(np.ascontiguousarray(rad, dtype=np.float32)).permute(2, 0, 1)[None].clamp_min(0.0)
 
     def display_at_best_gain(self, relit: torch.Tensor) -> torch.Tensor:
-        """``(1, 3, H, W)`` :meth:`display` of ``relit`` times the single gain that minimises its l1.
-
-        The gain ``g`` minimises the foreground l1 between ``display(g * relit)`` and
-        :meth:`target_display` (the reported metric; the display curve and the clipping make a
-        linear least-squares gain a poor fit where the target clips). It is searched as
-        ``g0 * 2**t``, ``t`` in [-4, 4] stops, on a 0.1-stop grid refined by golden section,
-        from ``g0`` = :func:`physrelight.metrics.best_gain` (least squares in linear radiance,
-        which scales as ``1 / k`` when ``relit`` is scaled by ``k``), so the result does not
-        change when ``relit`` is scaled. Metrics of this image report structure with the overall
-        level (exposure) removed.
-        """
-        from physrelight.metrics import best_gain
-
-        x = (relit.clamp_min(0.0) * 2.0**self.eval_stops).double()
-        fg = self.foreground().expand_as(x)
-        tgt = self.target_display().double()[fg]
-        g0 = float(best_gain(x, self.target_linear().double(), self.foreground())[0])
-        xs = x[fg]
-
-        def loss(t: torch.Tensor) -> torch.Tensor:  # (K,) stops -> (K,) l1
-            g = g0 * torch.pow(2.0, t)
-            return (colour.to_ldr(xs[None] * g[:, None]) - tgt[None]).abs().mean(1)
-
-        grid = torch.arange(-40, 41, dtype=torch.float64) / 10.0
-        best = int(torch.argmin(loss(grid)))
-        lo, hi = float(grid[max(best - 1, 0)]), float(grid[min(best + 1, len(grid) - 1)])
-        r = (5 ** 0.5 - 1) / 2
-        for _ in range(30):  # golden section on the bracketing 0.2 stops: to ~1e-7 stops
-            a, b = hi - r * (hi - lo), lo + r * (hi - lo)
-            la, lb = loss(torch.tensor([a, b], dtype=torch.float64))
-            lo, hi = (lo, b) if la <= lb else (a, hi)
-        g = g0 * 2.0 ** ((lo + hi) / 2)
-        return colour.to_ldr(x * g).to(relit.dtype)
+        """``(1, 3, H, W)`` :meth:`display` of ``relit`` times the single gain that minimises its foreground l1
+        against :meth:`target_display` (:func:`display_at_best_gain`): metrics of this image report structure
+        with the overall level (exposure) removed."""
+        return display_at_best_gain((relit.clamp_min(0.0) * 2.0**self.eval_stops), self.target_display(),
+                                    self.target_linear(), self.foreground())
 
     def display(self, relit: torch.Tensor) -> torch.Tensor:
         """``(1, 3, H, W)`` a method's linear output (this photo's units) -> display values as the target."""
@@ -247,3 +219,43 @@ def describe_pairs(pairs: Sequence[Pair]) -> dict[str, Any]:
         d["views"].add(p.view.name)
         d["scenes"].add(p.view.scene)
     return {k: {"pairs": d["pairs"], "views": len(d["views"]), "scenes": len(d["scenes"])} for k, d in out.items()}
+
+
+def display_at_best_gain(relit: torch.Tensor, target_display: torch.Tensor, target_linear: torch.Tensor,
+                         foreground: torch.Tensor) -> torch.Tensor:
+    """``(1, 3, H, W)`` the display values (sRGB, clipped) of ``relit`` times the single gain that minimises their
+    foreground l1 against ``target_display``.
+
+    The gain ``g`` is searched as ``g0 * 2**t``, ``t`` in [-4, 4] stops, on a 0.1-stop grid refined by golden
+    section, from ``g0`` = :func:`physrelight.metrics.best_gain` (least squares in linear radiance against
+    ``target_linear``, which scales as ``1 / k`` when ``relit`` is scaled by ``k``), so the result does not change
+    when ``relit`` is scaled. The display curve and the clipping make the linear least-squares gain alone a poor
+    fit where the target clips.
+
+    Args:
+        relit: ``(1, 3, H, W)`` linear output in the target's units. target_display: ``(1, 3, H, W)`` in [0, 1].
+        target_linear: ``(1, 3, H, W)`` the target's linear values. foreground: ``(1, 1, H, W)`` bool, the pixels
+            the l1 is taken over.
+    """
+    from physrelight.metrics import best_gain
+
+    x = relit.clamp_min(0.0).double()
+    fg = foreground.expand_as(x)
+    tgt = target_display.double()[fg]
+    g0 = float(best_gain(x, target_linear.double(), foreground)[0])
+    xs = x[fg]
+
+    def loss(t: torch.Tensor) -> torch.Tensor:  # (K,) stops -> (K,) l1
+        g = g0 * torch.pow(2.0, t)
+        return (colour.to_ldr(xs[None] * g[:, None]) - tgt[None]).abs().mean(1)
+
+    grid = torch.arange(-40, 41, dtype=torch.float64) / 10.0
+    best = int(torch.argmin(loss(grid)))
+    lo, hi = float(grid[max(best - 1, 0)]), float(grid[min(best + 1, len(grid) - 1)])
+    r = (5 ** 0.5 - 1) / 2
+    for _ in range(30):  # golden section on the bracketing 0.2 stops: to ~1e-7 stops
+        a, b = hi - r * (hi - lo), lo + r * (hi - lo)
+        la, lb = loss(torch.tensor([a, b], dtype=torch.float64))
+        lo, hi = (lo, b) if la <= lb else (a, hi)
+    g = g0 * 2.0 ** ((lo + hi) / 2)
+    return colour.to_ldr(x * g).to(relit.dtype)

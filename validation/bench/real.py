@@ -19,7 +19,8 @@ another panorama seen through the same camera is the exact relit sky. Per crop:
     SH radiance, the photo's own sky kept, and the exact target view (the ceiling with the
     segmenter's mask);
 (d) **self-relighting**: the target is the crop's own panorama, so the output should be the
-    input: foreground l1, SSIM, PSNR at full resolution;
+    input: foreground l1, SSIM, PSNR at full resolution, as they are and after each output's best
+    single gain (``protocols.display_at_best_gain``: structure apart from level);
 (e) **panels** for the eye (``OUT/panels/``).
 
 Protocol. Methods get the photo, the segmenter's sky mask and the target, as the user's
@@ -47,6 +48,7 @@ from learned.source_lighting import grey_world_level
 from physrelight import colour, envmap, metrics, panorama, sh
 
 from .methods import to_chw
+from .protocols import display_at_best_gain
 from .real_metrics import (BOUNDARY_TOLERANCE, ESTIMATES, PSNR_CAP, SEGMENTERS, SELF_METHODS, SKY_SOURCES,
                            SPHERE_NORMALS, brightness_sky, dc_luminance, level_stops, shading_error, targets_for,
                            top_rows_sky)
@@ -154,9 +156,10 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
     out["lighting"]["truth_order2"] = {"shading_error": shading_error(E2, truth), "level_stops": 0.0}
     out["world_sh"] = {name: np.asarray(sh.rotate(L, R.T)).tolist() for name, L in estimates.items()}
 
-    # (d) self-relighting: the target is the source; the output should be the photo
+    # (d) self-relighting: the target is the source; the output should be the photo. Also after each output's best
+    # single gain (display_at_best_gain): its structure apart from its level
     photo_disp = to_chw(crop.display())
-    preds, names = [], []
+    preds, gained, names = [], [], []
     for m in SELF_METHODS[:-1]:
         t0 = time.perf_counter()
         relit = relighter.relight_full_resolution(lin, seg, torch.from_numpy(source).float(),
@@ -165,13 +168,21 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
                                                   known_source=m.endswith("_known"))["relit"]
         seconds.setdefault(m, time.perf_counter() - t0)
         preds.append(torch.where(fg, _display(relit), photo_disp))
+        if bool(fg.any()):
+            gained.append(torch.where(fg, display_at_best_gain(relit, photo_disp, lin, fg), photo_disp))
         names.append(m)
     preds.append(photo_disp)
+    gained.append(photo_disp)
     names.append("identity")
     if bool(fg.any()):
+        def cap(k: str, v: float) -> float:
+            return float(min(v, PSNR_CAP) if k == "psnr" else v)
+
         s = score(preds, [photo_disp] * len(preds), [fg] * len(preds))
-        out["self"] = {n: {k: float(min(s[k][i], PSNR_CAP) if k == "psnr" else s[k][i])
-                           for k in ("l1", "ssim", "psnr", "ciede2000")} for i, n in enumerate(names)}
+        sg = score(gained, [photo_disp] * len(gained), [fg] * len(gained), which=("l1", "ssim", "psnr"))
+        out["self"] = {n: {**{k: cap(k, s[k][i]) for k in ("l1", "ssim", "psnr", "ciede2000")},
+                           **{f"{k}_at_best_gain": cap(k, sg[k][i]) for k in ("l1", "ssim", "psnr")}}
+                       for i, n in enumerate(names)}
     else:
         out["self"] = None
 

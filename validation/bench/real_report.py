@@ -87,7 +87,8 @@ def summarise(crops: Sequence[dict[str, Any]], samples: int) -> dict[str, Any]:
                       "psnr": iv(main, lambda c, s=s: _crop_sky(c, s, "psnr"))} for s in SKY_SOURCES}
     with_self = [c for c in main if c["self"] is not None]
     apart_self = [c for c in apart if c["self"] is not None]
-    out["self"] = {m: {k: iv(with_self, lambda c, m=m, k=k: c["self"][m][k]) for k in ("l1", "ssim", "psnr")}
+    out["self"] = {m: {k: iv(with_self, lambda c, m=m, k=k: c["self"][m][k])
+                       for k in ("l1", "ssim", "psnr", "l1_at_best_gain", "ssim_at_best_gain", "psnr_at_best_gain")}
                    for m in SELF_METHODS if m != "identity"}
     out["self_apart"] = {m: {k: iv(apart_self, lambda c, m=m, k=k: c["self"][m][k]) for k in ("l1", "psnr")}
                          for m in SELF_METHODS if m != "identity"}
@@ -195,6 +196,14 @@ def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
     lines += _table(groups, s, names, lambda g, r: g["self"][r]["ssim"], "method")
     lines += ["", "PSNR (dB):", ""]
     lines += _table(groups, s, names, lambda g, r: g["self"][r]["psnr"], "method", 2)
+    lines += ["", "The same after each output's best single gain (its level removed, its structure kept: "
+              "`validation.bench.protocols.display_at_best_gain`, as `bench --full`'s exposure-invariant columns), "
+              "l1, SSIM and PSNR (dB):", ""]
+    lines += _table(groups, s, names, lambda g, r: g["self"][r]["l1_at_best_gain"], "method", 4)
+    lines += [""]
+    lines += _table(groups, s, names, lambda g, r: g["self"][r]["ssim_at_best_gain"], "method")
+    lines += [""]
+    lines += _table(groups, s, names, lambda g, r: g["self"][r]["psnr_at_best_gain"], "method", 2)
     lines += ["", "The crops counted apart (no sky, or mostly ground), l1 and PSNR (dB):", ""]
     lines += _table(groups, s, names, lambda g, r: g["self_apart"][r]["l1"], "method", 4)
     lines += [""]
