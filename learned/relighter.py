@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from physrelight import colour, image_model, sh
+from physrelight import colour, image_model, sh, stats
 from physrelight.lighting_prior import LightingPrior
 from physrelight.quotient import SMOOTH_RADIUS, quotient_relight
 from physrelight.sky_model import FIT_GLOW_EXPONENT, horizon_clamped, sun_disc
@@ -1080,7 +1080,7 @@ def pitch_from_verticals(image: torch.Tensor, K: Any, limits: tuple[float, float
     mag = torch.sqrt(gx * gx + gy * gy)
     ex, ey = -gy, gx  # along the edge (image x right, y down)
     tilt = torch.rad2deg(torch.atan2(ex.abs(), ey.abs()))  # 0: a vertical edge
-    sel = (mag > torch.quantile(mag, VERTICALS_EDGE_QUANTILE)) & (tilt < VERTICALS_MAX_TILT_DEG) & (mag > 0)
+    sel = (mag > stats.quantile(mag, VERTICALS_EDGE_QUANTILE)) & (tilt < VERTICALS_MAX_TILT_DEG) & (mag > 0)
     if int(sel.sum()) < 20:
         return None
     h, w = mag.shape

@@ -28,6 +28,7 @@ import math
 import torch
 
 from physrelight import colour
+from physrelight.stats import quantile
 
 __all__ = ["DARK_KEY", "MIDDLE_GREY", "MODES", "exposure_gain", "log_average", "parse_exposure"]
 
@@ -98,5 +99,5 @@ def exposure_gain(mode: str | float, relit: torch.Tensor, source: torch.Tensor,
         y = (relit.clamp_min(0) * relit.new_tensor(colour.LUMINANCE)[None, :, None, None]).sum(1, keepdim=True)
         for b in range(relit.shape[0]):
             if bool(highlights[b].any()):
-                gain[b] = torch.minimum(gain[b], 1.0 / torch.quantile(y[b][highlights[b]].float(), 0.99).clamp_min(1e-12))
+                gain[b] = torch.minimum(gain[b], 1.0 / quantile(y[b][highlights[b]].float(), 0.99).clamp_min(1e-12))
     return gain.clamp(2.0**-16, 2.0**16)

@@ -10,11 +10,15 @@ statistic is the case-weighted mean difference, ``sum(d over the drawn groups' c
 
 from __future__ import annotations
 
-from typing import NamedTuple, Sequence
+import math
+from typing import TYPE_CHECKING, NamedTuple, Sequence
 
 import numpy as np
 
-__all__ = ["MeanInterval", "PairedDifference", "hierarchical_bootstrap", "paired_bootstrap"]
+if TYPE_CHECKING:
+    import torch
+
+__all__ = ["MeanInterval", "PairedDifference", "hierarchical_bootstrap", "paired_bootstrap", "quantile"]
 
 
 class PairedDifference(NamedTuple):
@@ -115,3 +119,34 @@ def hierarchical_bootstrap(values: Sequence[float] | np.ndarray, groups: Sequenc
         boot[s] = np.concatenate([m[rng.integers(0, m.size, size=m.size)] for m in drawn]).mean()
     lo, hi = np.quantile(boot, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
     return MeanInterval(float(v.mean()), float(lo), float(hi), len(members), int(v.size))
+
+
+TORCH_QUANTILE_MAX = 2 ** 24
+"""The most elements ``torch.quantile`` takes (torch 2.13 refuses more: "input tensor is too large"): the sky of a
+24-megapixel photo can hold more."""
+
+
+def quantile(x: "torch.Tensor", q: float) -> "torch.Tensor":
+    """The ``q`` quantile of all of ``x``'s elements, as ``torch.quantile(x.flatten(), q)`` computes it (linear
+    interpolation between the two order statistics around ``q (n - 1)``), for a tensor of any size: above
+    :data:`TORCH_QUANTILE_MAX` elements the two order statistics come from ``torch.kthvalue``. A 0-d tensor of
+    ``x``'s dtype.
+
+    Raises:
+        ValueError: ``x`` is empty or ``q`` is not in [0, 1].
+    """
+    import torch
+
+    flat = x.flatten()
+    n = flat.numel()
+    if n == 0:
+        raise ValueError("quantile of an empty tensor")
+    if not (isinstance(q, (int, float)) and 0.0 <= float(q) <= 1.0):
+        raise ValueError(f"q must be a number in [0, 1], got {q!r}")
+    if n <= TORCH_QUANTILE_MAX:
+        return torch.quantile(flat, float(q))
+    pos = float(q) * (n - 1)
+    lo = math.floor(pos)
+    a = torch.kthvalue(flat, lo + 1).values
+    b = torch.kthvalue(flat, min(lo + 2, n)).values
+    return torch.lerp(a, b, torch.tensor(pos - lo, dtype=flat.dtype))

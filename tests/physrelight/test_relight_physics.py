@@ -114,6 +114,19 @@ def test_07_auto_exposure_does_not_clip_the_sky() -> None:
     assert float(exposure.exposure_gain("auto", relit, source, ~sky)) > 8
 
 
+def test_07b_auto_exposure_takes_a_sky_larger_than_torch_quantile_does() -> None:
+    """A 24-megapixel photo's sky can hold more than 2**24 pixels, more than ``torch.quantile`` takes: the sky's
+    99th percentile is still found (``physrelight.stats.quantile``) and the same case as test 07 holds."""
+    h, w = 4200, 4100  # 17.2 M pixels, all but the last row sky
+    source = torch.full((1, 3, h, w), 0.02)
+    relit = torch.full((1, 3, h, w), 0.5)
+    sky = torch.ones(1, 1, h, w, dtype=torch.bool)
+    sky[..., -1, :] = False
+    relit[..., -1, :] = 0.02
+    assert int(sky.sum()) > 2 ** 24
+    assert math.isclose(float(exposure.exposure_gain("auto", relit, source, ~sky, highlights=sky)), 2.0, rel_tol=1e-5)
+
+
 @pytest.mark.parametrize("bad", ["bright", "nan", "1e9", ""])
 def test_08_exposure_values_are_checked(bad) -> None:
     with pytest.raises(ValueError, match="exposure"):

@@ -58,3 +58,27 @@ def test_03_resampling_whole_groups_widens_the_interval_when_cases_share_a_group
 def test_04_bad_input_names_the_problem(kwargs: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         paired_bootstrap(**kwargs)
+
+
+def test_05_quantile_is_torchs_below_its_limit_and_the_order_statistics_above() -> None:
+    """``stats.quantile``: bit for bit ``torch.quantile`` up to ``TORCH_QUANTILE_MAX`` elements (which torch itself
+    refuses beyond), and above it numpy's linear quantile of the same values (a 24-megapixel sky has more)."""
+    import torch
+
+    from physrelight.stats import TORCH_QUANTILE_MAX, quantile
+
+    g = torch.Generator().manual_seed(0)
+    for n in (1, 2, 7, 1000):
+        x = torch.rand(n, generator=g)
+        for q in (0.0, 0.1, 0.5, 0.99, 1.0):
+            assert torch.equal(quantile(x, q), torch.quantile(x, q))
+    big = torch.rand(TORCH_QUANTILE_MAX + 5, generator=g, dtype=torch.float64)
+    with pytest.raises(RuntimeError, match="too large"):
+        torch.quantile(big, 0.5)
+    for q in (0.0, 0.37, 0.99, 1.0):
+        assert float(quantile(big, q)) == pytest.approx(float(np.quantile(big.numpy(), q)), abs=1e-12)
+    assert float(quantile(big.reshape(3, -1), 0.5)) == float(quantile(big, 0.5))  # all the elements, any shape
+    with pytest.raises(ValueError, match="empty"):
+        quantile(torch.zeros(0), 0.5)
+    with pytest.raises(ValueError, match="q must"):
+        quantile(big, 1.5)
