@@ -691,6 +691,9 @@ class Relighter:
 
         if not math.isfinite(float(azimuth_deg)):
             raise ValueError(f"azimuth must be a finite number of degrees, got {azimuth_deg!r}")
+        if not bool((lin > 0).any()):
+            # nothing to divide by or to meter: the lighting solve would return NaN and name that instead
+            raise ValueError("the photo is black (every pixel 0): there is no light in it to relight")
         if sky_source is not None and sky_source not in SKY_SOURCES:
             raise ValueError(f"sky_source must be one of {SKY_SOURCES} or None, got {sky_source!r}")
         parse_exposure(exposure)

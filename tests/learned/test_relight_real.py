@@ -271,7 +271,7 @@ def photo_file(tmp_path) -> Path:
 
 @pytest.mark.parametrize("case", ["rgb_mask", "all_sky", "no_sky", "sky_with_env", "bad_source_env", "fps",
                                   "sky_grow", "unwritable", "layers_is_file", "source_without_quotient",
-                                  "sh_target_sky"])
+                                  "sh_target_sky", "black_photo"])
 def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, capsys, case) -> None:
     out = tmp_path / "out" / "x.png"
     out.parent.mkdir()
@@ -302,6 +302,9 @@ def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, 
     elif case == "sh_target_sky":  # an SH target has no sky of its own to render
         np.save(tmp_path / "t.npy", np.asarray(sh.project_envmap(envmap.read(FOREST), order=2)))
         args[args.index("--env"): args.index("--env") + 2] = ["--sh", str(tmp_path / "t.npy"), "--sky-source", "target"]
+    elif case == "black_photo":  # a lens cap: named as such, not as the NaN its lighting solve would give
+        io.write_png(tmp_path / "black.png", np.zeros((60, 90, 3), np.float32))
+        args[1] = str(tmp_path / "black.png")
     if case in ("fps", "sky_grow"):
         with pytest.raises(SystemExit) as exit_:
             _cli(args, capsys)
@@ -312,6 +315,8 @@ def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, 
         assert rc == 2, err
     assert "\n" not in err and "error" in err and "Traceback" not in err
     assert list((tmp_path / "out").iterdir()) == []
+    if case == "black_photo":
+        assert "photo is black" in err
 
 
 def test_04b_a_textured_foreground_keeps_its_outliers_against_a_smooth_sky() -> None:
