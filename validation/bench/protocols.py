@@ -120,7 +120,7 @@ class Pair:
         """``(1, 3, H, W)`` :meth:`display` of ``relit`` times the single gain that minimises its foreground l1
         against :meth:`target_display` (:func:`display_at_best_gain`): metrics of this image report structure
         with the overall level (exposure) removed."""
-        return display_at_best_gain((relit.clamp_min(0.0) * 2.0**self.eval_stops), self.target_display(),
+        return display_at_best_gain(relit * 2.0**self.eval_stops, self.target_display(),
                                     self.target_linear(), self.foreground())
 
     def display(self, relit: torch.Tensor) -> torch.Tensor:
