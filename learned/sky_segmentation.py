@@ -272,6 +272,10 @@ variance of log RGB)."""
 REFINEMENT = "gauss"
 VARIANCE_FLOOR = 1e-3
 """Floor of a side's local variance of log RGB in ``"gauss"`` (about 3 % noise)."""
+MIN_SURE_SHARE = 0.0
+"""The least share of :func:`refine_sky_boundary`'s window that a side's sure pixels must fill for that side's
+*local* statistics; below it the side's statistics over the whole photo stand in (0: any sure pixel in the
+window will do)."""
 
 
 def label_components(mask: torch.Tensor) -> torch.Tensor:
@@ -437,7 +441,8 @@ def _dilate(mask: torch.Tensor, r: int) -> torch.Tensor:
     return F.max_pool2d(m, (2 * r + 1, 1), stride=1, padding=(r, 0)) > 0.5
 
 
-def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refine: str = REFINEMENT) -> torch.Tensor:
+def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refine: str = REFINEMENT,
+                        min_share: float | None = None) -> torch.Tensor:
     """Decide the pixels near a sky boundary by colour, at full resolution.
 
     A mask brought up from a working resolution is right away from its boundary and wrong
@@ -449,10 +454,13 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
 
     Args:
         sky: ``(1, 1, H, W)`` bool. image: ``(1, 3, H, W)`` linear. band: pixels.
+        min_share: a side's local statistics need its sure pixels to fill this share of the window, else its
+            statistics over the whole photo are used (:data:`MIN_SURE_SHARE` when None).
 
     Returns:
         ``(1, 1, H, W)`` bool.
     """
+    min_share = MIN_SURE_SHARE if min_share is None else float(min_share)
     near = _dilate(sky, band) & _dilate(~sky, band)
     if not bool(near.any()):
         return sky
@@ -462,30 +470,31 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
         return sky
     r = 4 * band
     if refine == "local":
-        d_sky = ((x - _local_mean(sure_sky, x, r)) ** 2).sum(1, keepdim=True)
-        d_fg = ((x - _local_mean(sure_fg, x, r)) ** 2).sum(1, keepdim=True)
+        d_sky = ((x - _local_mean(sure_sky, x, r, min_share)) ** 2).sum(1, keepdim=True)
+        d_fg = ((x - _local_mean(sure_fg, x, r, min_share)) ** 2).sum(1, keepdim=True)
     else:
         # "gauss": a diagonal Gaussian per side, so a smooth sky does not claim a varied foreground's outliers
-        d_sky, d_fg = _local_gaussian_nll(x, sure_sky, r), _local_gaussian_nll(x, sure_fg, r)
+        d_sky, d_fg = _local_gaussian_nll(x, sure_sky, r, min_share), _local_gaussian_nll(x, sure_fg, r, min_share)
     return torch.where(near, d_sky < d_fg, sky)
 
 
-def _local_mean(w: torch.Tensor, v: torch.Tensor, r: int) -> torch.Tensor:
+def _local_mean(w: torch.Tensor, v: torch.Tensor, r: int, min_share: float = 0.0) -> torch.Tensor:
     """``(1, C, H, W)`` mean of ``v (1, C, H, W)`` over the pixels of weight ``w (1, 1, H, W)`` (not all
     zero) within ``r`` of each pixel; where none is that near, over all of them."""
     from physrelight.guided_filter import box_filter
 
     n = box_filter(w, r)
     overall = (v * w).sum((2, 3), keepdim=True) / float(w.sum())
-    return torch.where(n > 0, box_filter(v * w, r) / n.clamp_min(1e-12), overall)
+    local = n > min_share if min_share > 0 else n > 0
+    return torch.where(local, box_filter(v * w, r) / n.clamp_min(1e-12), overall)
 
 
-def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int) -> torch.Tensor:
+def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int, min_share: float = 0.0) -> torch.Tensor:
     """``(1, 1, H, W)`` negative log-likelihood (times 2, up to a constant) of each pixel of ``x (1, C, H, W)``
     under the diagonal Gaussian of the pixels ``w`` near it (:func:`_local_mean`; variance floor
     :data:`VARIANCE_FLOOR`)."""
-    mu = _local_mean(w, x, r)
-    var = (_local_mean(w, x * x, r) - mu * mu).clamp_min(0) + VARIANCE_FLOOR
+    mu = _local_mean(w, x, r, min_share)
+    var = (_local_mean(w, x * x, r, min_share) - mu * mu).clamp_min(0) + VARIANCE_FLOOR
     return ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
 
 
