@@ -37,12 +37,27 @@ lattice = importlib.import_module("40_lattice_sky_probe")
 SHARES = (0.0, 1 / 64, 1 / 32, 1 / 16, 1 / 8)
 
 
+_GATE = ss._local_mean
+
+
+def _prior_mean(w: torch.Tensor, v: torch.Tensor, r: int, min_share: float = 0.0) -> torch.Tensor:
+    """Round 2's candidate: the side's whole-photo statistics as ``min_share`` pseudo-pixels (a share of the
+    window), so the local statistics take over smoothly as the sure pixels fill the window."""
+    from physrelight.guided_filter import box_filter
+
+    if min_share <= 0:
+        return _GATE(w, v, r, min_share)
+    overall = (v * w).sum((2, 3), keepdim=True) / float(w.sum())
+    return (box_filter(v * w, r) + min_share * overall) / (box_filter(w, r) + min_share)
+
+
 def masks(model, lin: torch.Tensor, shares) -> dict[float, np.ndarray]:
+    """Per share, the shipped mask with that share; a negative share ``-s`` is the round-2 prior of ``s``."""
     out = {}
     for s in shares:
-        ss.MIN_SURE_SHARE = s
+        ss.MIN_SURE_SHARE, ss._local_mean = abs(s), (_prior_mean if s < 0 else _GATE)
         out[s] = ss.sky_mask_full_resolution(model, lin)[0][0, 0].numpy()
-    ss.MIN_SURE_SHARE = 0.0
+    ss.MIN_SURE_SHARE, ss._local_mean = 0.125, _GATE
     return out
 
 
@@ -50,7 +65,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("-o", "--out", required=True)
     ap.add_argument("--heldout", action="store_true")
-    ap.add_argument("--share", type=float, action="append", default=[])
+    ap.add_argument("--share", type=float, action="append", default=[],
+                    help="a gate share; -S for the round-2 prior of S pseudo-pixels (the first is the reference)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     model = Relighter.load().sky_segmenter
