@@ -105,7 +105,7 @@ class GroundPhotos(Photos):
     """Study 25's cache with two more depth sources: ``ground_est`` (the decomposition's normals) and
     ``ground_true`` (the true normals; the model's ceiling). ``min_cos`` of a setting carries the variant."""
 
-    variants = {}
+    variants: dict = {}
 
     def view(self, v) -> dict:
         vd = super().view(v)
@@ -157,7 +157,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     GroundPhotos.variants = {
-        "g0.95": dict(ground_cos=0.95), "g0.9": dict(ground_cos=0.9), "g0.8": dict(ground_cos=0.8), "g0.95": dict(ground_cos=0.95),
+        "g0.95": dict(ground_cos=0.95), "g0.9": dict(ground_cos=0.9), "g0.8": dict(ground_cos=0.8),
         "g0.9_nocontact": dict(ground_cos=0.9, contact=False), "g0.9_billboard": dict(ground_cos=0.9, integrate=False),
     }
     P = GroundPhotos(args.root, Relighter.load())
