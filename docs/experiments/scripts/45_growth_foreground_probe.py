@@ -4,7 +4,9 @@
 than under the local Gaussian of the non-sky pixels around it (``"all"``). Candidates: ``"exclude"`` (that
 Gaussian without the non-sky pixels that fit the sky model) and ``"minority"`` (the same where those are under
 half of the window's non-sky pixels). Scored as study 44 on the training crops (plain and lattice); ``--heldout``
-scores sunrise's crops once.
+scores sunrise's crops once. The candidates were a ``foreground=`` argument of ``grow_sky_by_colour`` (its
+local Gaussian fitted to ``~sky & ~(maha < chi2)``), removed after the run because they changed no mask
+(docs/experiments/45-growth-without-its-own-candidates.md); run today, every setting is today's.
 
     .venv/bin/python docs/experiments/scripts/45_growth_foreground_probe.py -o docs/experiments/results/45_training.json
     .venv/bin/python docs/experiments/scripts/45_growth_foreground_probe.py --heldout --only all --only CHOSEN -o docs/experiments/results/45_sunrise.json
