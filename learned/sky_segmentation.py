@@ -464,6 +464,8 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
         ``(1, 1, H, W)`` bool.
     """
     min_share = MIN_SURE_SHARE if min_share is None else float(min_share)
+    if not 0.0 <= min_share < 1.0:
+        raise ValueError(f"min_share must lie in [0, 1), got {min_share!r}")
     near = _dilate(sky, band) & _dilate(~sky, band)
     if not bool(near.any()):
         return sky
@@ -483,13 +485,13 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
 
 def _local_mean(w: torch.Tensor, v: torch.Tensor, r: int, min_share: float = 0.0) -> torch.Tensor:
     """``(1, C, H, W)`` mean of ``v (1, C, H, W)`` over the pixels of weight ``w (1, 1, H, W)`` (not all
-    zero) within ``r`` of each pixel; where none is that near, over all of them."""
+    zero) within ``r`` of each pixel; where they fill no more than ``min_share`` of that window (none, at 0),
+    over all of them."""
     from physrelight.guided_filter import box_filter
 
     n = box_filter(w, r)
     overall = (v * w).sum((2, 3), keepdim=True) / float(w.sum())
-    local = n > min_share if min_share > 0 else n > 0
-    return torch.where(local, box_filter(v * w, r) / n.clamp_min(1e-12), overall)
+    return torch.where(n > min_share, box_filter(v * w, r) / n.clamp_min(1e-12), overall)
 
 
 def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int, min_share: float = 0.0) -> torch.Tensor:
