@@ -15,7 +15,6 @@ import functools
 import importlib
 import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -23,12 +22,10 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from real_crop_scores import bench_crops, crop_panoramas  # noqa: E402
+from real_crop_scores import score_mask_variants  # noqa: E402
 
 from learned import Relighter  # noqa: E402
 from learned import sky_segmentation as ss  # noqa: E402
-from physrelight import metrics  # noqa: E402
-from physrelight.stats import paired_bootstrap  # noqa: E402
 
 lattice = importlib.import_module("40_lattice_sky_probe")
 
@@ -56,43 +53,7 @@ def main() -> None:
     torch.set_num_threads(1)
     model = Relighter.load().sky_segmenter
     settings = tuple(args.only) or SETTINGS
-    group, panos = crop_panoramas(args.heldout)
-    sets = {"plain": {s: [] for s in settings}, "lattice": {s: [] for s in settings}}
-    no_sky = {s: [] for s in settings}
-    groups = {"plain": [], "lattice": []}
-    t0 = time.time()
-    for pano, crop in bench_crops(panos):
-        lin = crop.linear()
-        if crop.sky.mean() < 0.01:
-            for s, m in masks(model, lin, settings).items():
-                no_sky[s].append(float(m.mean()))
-            continue
-        for s, m in masks(model, lin, settings).items():
-            sets["plain"][s].append((metrics.mask_iou(m, crop.sky) + metrics.boundary_f(m, crop.sky, 2.0)) / 2)
-        groups["plain"].append(f"{pano.name}_{crop.index}")
-        if not args.heldout and crop.sky.mean() >= 0.10:
-            for seed in (0, 1):
-                comp, truth, _ = lattice.composite(crop, seed)
-                for s, m in masks(model, comp, settings).items():
-                    sets["lattice"][s].append((metrics.mask_iou(m, truth) + metrics.boundary_f(m, truth, 2.0)) / 2)
-                groups["lattice"].append(f"{pano.name}_{crop.index}")
-    out = {"group": group, "seconds": time.time() - t0, "settings": list(settings)}
-    for name, rows in sets.items():
-        if not groups[name]:
-            continue
-        base = np.asarray(rows[settings[0]])
-        out[name] = {}
-        for s in settings:
-            v = np.asarray(rows[s])
-            entry = {"mean_iou_f": float(v.mean()), "n": int(v.size)}
-            if s != settings[0]:
-                entry["minus_first"] = paired_bootstrap(v, base, groups=np.asarray(groups[name]), seed=0)._asdict()
-            out[name][str(s)] = entry
-            print(f"{name:8s} {s:9s}: mean IoU/F {v.mean():.4f}"
-                  + (f"  {entry['minus_first']['diff']:+.4f} [{entry['minus_first']['lo']:+.4f}, "
-                     f"{entry['minus_first']['hi']:+.4f}]" if s != settings[0] else ""), flush=True)
-    out["no_sky_called"] = {str(s): float(np.mean(v)) if v else None for s, v in no_sky.items()}
-    print("sky called on crops without sky:", {k: round(v, 4) for k, v in out["no_sky_called"].items() if v is not None})
+    out = score_mask_variants(lambda lin: masks(model, lin, settings), settings, args.heldout, lattice.composite)
     Path(args.out).write_text(json.dumps(out, indent=1))
 
 

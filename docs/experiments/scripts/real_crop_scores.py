@@ -1,5 +1,5 @@
-"""What the sky-mask probes (studies 26, 28, 30), the crop probes (studies 34-36) and the bench-pair probes
-(studies 29, 33) share.
+"""What the sky-mask probes (studies 26, 28, 30, 44-46), the crop probes (studies 34-36) and the bench-pair
+probes (studies 29, 33) share.
 
 Sky masks: every ``bench --real --full`` crop (seed 0, 16 per panorama, fov 45-75 deg, 4 samples) of the
 training panoramas or of the held-out one, each mask setting scored against the true sky: IoU and boundary
@@ -91,3 +91,56 @@ def bench_l1(methods: dict[str, Callable[[Any], torch.Tensor]], pairs: Sequence[
             if progress is not None:
                 progress(name, l1[name])
     return l1
+
+
+def score_mask_variants(masks_of: Callable[[torch.Tensor], dict[Any, np.ndarray]], settings: Sequence[Any],
+                        heldout: bool, lattice_composite: Callable[[Any, int], tuple] | None = None) -> dict[str, Any]:
+    """Studies 44-46: the mean of IoU and boundary F (2 px) of each mask setting on the crops with sky ("plain"),
+    on study 40's lattice composites of the training crops with >= 10 % sky ("lattice"; ``lattice_composite``
+    is its ``composite(crop, seed)``, seeds 0 and 1) and the sky called on the crops without sky; each setting
+    against the first with a bootstrap over crops (a crop's two composites stay together). Prints the table.
+
+    ``masks_of(linear photo (1, 3, H, W))`` gives every setting's ``(H, W)`` bool mask for one photo."""
+    from physrelight.stats import paired_bootstrap
+
+    group, panos = crop_panoramas(heldout)
+    sets = {"plain": {s: [] for s in settings}, "lattice": {s: [] for s in settings}}
+    no_sky = {s: [] for s in settings}
+    groups: dict[str, list[str]] = {"plain": [], "lattice": []}
+    t0 = time.time()
+
+    def add(name: str, masks: dict[Any, np.ndarray], truth: np.ndarray, crop_name: str) -> None:
+        for s, m in masks.items():
+            sets[name][s].append((metrics.mask_iou(m, truth) + metrics.boundary_f(m, truth, 2.0)) / 2)
+        groups[name].append(crop_name)
+
+    for pano, crop in bench_crops(panos):
+        lin = crop.linear()
+        if crop.sky.mean() < 0.01:
+            for s, m in masks_of(lin).items():
+                no_sky[s].append(float(m.mean()))
+            continue
+        add("plain", masks_of(lin), crop.sky, f"{pano.name}_{crop.index}")
+        if lattice_composite is not None and not heldout and crop.sky.mean() >= 0.10:
+            for seed in (0, 1):
+                comp, truth, _ = lattice_composite(crop, seed)
+                add("lattice", masks_of(comp), truth, f"{pano.name}_{crop.index}")
+    out: dict[str, Any] = {"group": group, "seconds": time.time() - t0, "settings": [str(s) for s in settings]}
+    for name, rows in sets.items():
+        if not groups[name]:
+            continue
+        base = np.asarray(rows[settings[0]])
+        out[name] = {}
+        for s in settings:
+            v = np.asarray(rows[s])
+            entry: dict[str, Any] = {"mean_iou_f": float(v.mean()), "n": int(v.size)}
+            line = f"{name:8s} {str(s):9s}: mean IoU/F {v.mean():.4f}"
+            if s != settings[0]:
+                d = paired_bootstrap(v, base, groups=np.asarray(groups[name]), seed=0)
+                entry["minus_first"] = d._asdict()
+                line += f"  {d.diff:+.4f} [{d.lo:+.4f}, {d.hi:+.4f}]"
+            out[name][str(s)] = entry
+            print(line, flush=True)
+    out["no_sky_called"] = {str(s): float(np.mean(v)) if v else None for s, v in no_sky.items()}
+    print("sky called on crops without sky:", {k: round(v, 4) for k, v in out["no_sky_called"].items() if v is not None})
+    return out
