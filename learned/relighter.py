@@ -708,6 +708,13 @@ class Relighter:
             reuse["sky"], why = self.photo_sky(lin, sky_mask)
             if why:
                 warnings.warn(f"no sky relit: {why}; relighting the foreground only", UserWarning, stacklevel=3)
+            elif sky_mask is None and self.sky_segmenter is not None and bool(reuse["sky"].any()):
+                from .sky_segmentation import is_monochrome
+
+                if is_monochrome(lin):
+                    warnings.warn("the photo has no colour: the sky mask cannot tell the sky by its colour and may "
+                                  "take white walls for sky; check the sky_mask layer, or give a mask",
+                                  UserWarning, stacklevel=3)
             K = panorama.view_intrinsics(float(fov_deg), w, h)
             if world_to_camera is not None:
                 T = world_to_camera

@@ -28,7 +28,7 @@ from . import checkpoint as ckpt
 from .data import resize_short_side
 from .networks import UNet
 
-__all__ = ["DUSK_SKY", "SEGMENT_RES", "WIDE_AUGMENT", "SkySegmenter", "dusk_sky", "grow_sky_by_colour", "jpeg_like", "label_components", "load_sky_segmenter", "photometric_augment", "plausible_sky",
+__all__ = ["DUSK_SKY", "SEGMENT_RES", "WIDE_AUGMENT", "SkySegmenter", "dusk_sky", "grow_sky_by_colour", "is_monochrome", "jpeg_like", "label_components", "load_sky_segmenter", "photometric_augment", "plausible_sky",
            "refine_sky_boundary", "segment_sky", "sky_colour_model", "sky_mask_full_resolution", "sky_probability"]
 
 _LUMA = colour.LUMINANCE
@@ -279,6 +279,28 @@ window will do, as before study 44). An object narrower than the band has no sur
 Gaussian of the few unrelated ones near it, at the variance floor, lost rocket.jpg's body to the sky
 (docs/experiments/44-band-statistics-from-enough-pixels.md: training crops +0.009, lattices +0.024, sunrise
 +0.022 in mean IoU/F)."""
+
+
+MONOCHROME_TOLERANCE = 3.0 / 255.0
+"""A display pixel counts as coloured when its channels spread by more than this (JPEG's chroma noise on a
+grey photo stays under it)."""
+MONOCHROME_MAX_SHARE = 0.005
+"""A photo is monochrome when no more than this share of its pixels is coloured."""
+
+
+def is_monochrome(image: torch.Tensor) -> bool:
+    """Whether a linear photo ``(1, 3, H, W)`` has no colour: a black-and-white photo stored as RGB.
+
+    The sky mask leans on the sky's colour (the segmenter was trained on colour photos; the band and the
+    growth compare colours), so on such a photo it takes white walls and pale objects for sky: scikit-image's
+    ``camera`` (the cameraman, its three channels equal) loses a white tower and part of the camcorder to it.
+    :meth:`learned.relighter.Relighter.relight_layers` says so in a warning. A tinted monochrome (sepia) has
+    colour by this test.
+    """
+    _check_image(image)
+    d = colour.to_ldr(image[0].clamp_min(0.0))
+    spread = d.amax(0) - d.amin(0)
+    return float((spread > MONOCHROME_TOLERANCE).float().mean()) <= MONOCHROME_MAX_SHARE
 
 
 def label_components(mask: torch.Tensor) -> torch.Tensor:

@@ -7,6 +7,7 @@ one line, exit status 2 and no file."""
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -204,6 +205,28 @@ def test_06_a_photo_without_sky_gets_a_warning_and_no_painted_sky(relighter, nam
     with pytest.warns(UserWarning, match="no sky relit"):
         layers = relighter.relight_layers(photo, FOREST, method="quotient")
     assert not layers["sky_mask"].any()
+
+
+def test_06b_a_black_and_white_photo_gets_a_warning_about_its_sky_mask(relighter) -> None:
+    """The cameraman (scikit-image's ``camera``, its three channels equal): the segmenter finds a sky, but with no
+    colour to go by it also takes the white tower and part of the camcorder; relight says so. The same photo
+    with a slight tint (a sepia print), and every colour photo of the other tests, have colour."""
+    skimage = pytest.importorskip("skimage")
+    from learned.sky_segmentation import is_monochrome
+
+    grey = np.repeat(skimage.data.camera()[..., None], 3, axis=-1)
+    with pytest.warns(UserWarning, match="the photo has no colour"):
+        layers = relighter.relight_layers(grey, FOREST, method="quotient")
+    assert layers["sky_mask"].any()
+    lin = colour.from_ldr(torch.from_numpy(grey).permute(2, 0, 1)[None].float() / 255)
+    assert is_monochrome(lin)
+    assert not is_monochrome(lin * torch.tensor([1.0, 0.8, 0.6])[None, :, None, None])
+    rocket = colour.from_ldr(torch.from_numpy(skimage.data.rocket()).permute(2, 0, 1)[None].float() / 255)
+    assert not is_monochrome(rocket)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        relighter.relight_layers(skimage.data.rocket(), FOREST, method="quotient")
+    assert not [w for w in caught if "no colour" in str(w.message)]
 
 
 def test_07_the_rocket_has_a_sky_and_its_towers_stay(relighter) -> None:
