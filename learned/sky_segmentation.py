@@ -466,6 +466,20 @@ def _dilate(mask: torch.Tensor, r: int) -> torch.Tensor:
     return F.max_pool2d(m, (2 * r + 1, 1), stride=1, padding=(r, 0)) > 0.5
 
 
+def _boundary_band(sky: torch.Tensor, band: int) -> torch.Tensor:
+    """``(B, 1, H, W)`` bool: the pixels within a ``(2 band + 1)^2`` square of both sky and non-sky,
+    ``_dilate(sky, band) & _dilate(~sky, band)``. A wide band reads both from one window count of the sky:
+    the window holds sky when its count is above 0 and non-sky when below the window's size (integer counts,
+    exact in float64), so one summed-area pass serves where two were run."""
+    from physrelight.guided_filter import box_filter
+
+    r = min(band, max(sky.shape[-2:]))
+    if r > _DILATE_POOL_MAX:
+        share = box_filter(sky.to(torch.float64), r)
+        return (share > 0) & (share < 1)
+    return _dilate(sky, band) & _dilate(~sky, band)
+
+
 def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refine: str = REFINEMENT,
                         min_share: float | None = None) -> torch.Tensor:
     """Decide the pixels near a sky boundary by colour, at full resolution.
@@ -488,7 +502,7 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
     min_share = MIN_SURE_SHARE if min_share is None else float(min_share)
     if not 0.0 <= min_share < 1.0:
         raise ValueError(f"min_share must lie in [0, 1), got {min_share!r}")
-    near = _dilate(sky, band) & _dilate(~sky, band)
+    near = _boundary_band(sky, band)
     if not bool(near.any()):
         return sky
     x = torch.log(image.clamp_min(1e-4))
@@ -520,8 +534,17 @@ def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int, min_share: flo
     """``(1, 1, H, W)`` negative log-likelihood (times 2, up to a constant) of each pixel of ``x (1, C, H, W)``
     under the diagonal Gaussian of the pixels ``w`` near it (:func:`_local_mean`; variance floor
     :data:`VARIANCE_FLOOR`)."""
-    mu = _local_mean(w, x, r, min_share)
-    var = (_local_mean(w, x * x, r, min_share) - mu * mu).clamp_min(0) + VARIANCE_FLOOR
+    from physrelight.guided_filter import box_filter
+
+    # :func:`_local_mean` of x and of x^2, with the window's weight, in one box filter of 2C + 1 planes (one
+    # window count instead of four, and each moment's sums once): the same sums, divided the same way
+    c = x.shape[1]
+    sums = box_filter(torch.cat([w, x * w, x * x * w], 1), r)
+    n, local = sums[:, :1], sums[:, :1] > min_share
+    total = float(w.sum())
+    mu = torch.where(local, sums[:, 1: 1 + c] / n.clamp_min(1e-12), (x * w).sum((2, 3), keepdim=True) / total)
+    ex2 = torch.where(local, sums[:, 1 + c:] / n.clamp_min(1e-12), (x * x * w).sum((2, 3), keepdim=True) / total)
+    var = (ex2 - mu * mu).clamp_min(0) + VARIANCE_FLOOR
     return ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from physrelight import colour, envmap, io, panorama, sh
 
@@ -469,6 +470,26 @@ def test_04e_the_growths_local_gaussian_at_its_candidates_is_the_whole_images() 
         torch.testing.assert_close(at, full, rtol=1e-10, atol=1e-10)
         some = torch.randperm(h * w, generator=g)[:17]
         torch.testing.assert_close(_local_gaussian_nll_at(x, wt, r, some), full[some], rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("band", [3, 16, 17, 40, 400])
+def test_04g_the_bands_one_pass_forms_equal_their_definitions(band) -> None:
+    """The colour band's speed-ups give the same bits: its pixels from one window count of the sky (wide bands)
+    equal the two dilations, and its Gaussians from one box filter of the weight and both moments equal
+    :func:`_local_mean` of ``x`` and of ``x^2`` (the gate at ``MIN_SURE_SHARE`` and at 0)."""
+    from learned.sky_segmentation import VARIANCE_FLOOR, _boundary_band, _dilate, _local_gaussian_nll, _local_mean
+
+    g = torch.Generator().manual_seed(band)
+    h, w = 90, 130
+    blobs = F.interpolate(torch.rand(1, 1, 9, 13, generator=g), size=(h, w), mode="bilinear") > 0.5
+    assert torch.equal(_boundary_band(blobs, band), _dilate(blobs, band) & _dilate(~blobs, band))
+    x = torch.randn(1, 3, h, w, generator=g)
+    wt = (blobs & (torch.rand(1, 1, h, w, generator=g) < 0.7)).float()
+    for share in (0.0, 0.125):
+        mu = _local_mean(wt, x, band, share)
+        var = (_local_mean(wt, x * x, band, share) - mu * mu).clamp_min(0) + VARIANCE_FLOOR
+        want = ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
+        assert torch.equal(_local_gaussian_nll(x, wt, band, share), want)
 
 
 def test_04d_the_growth_neither_extrapolates_the_sky_nor_trusts_a_mixed_mask() -> None:
