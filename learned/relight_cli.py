@@ -199,7 +199,7 @@ def _relight(args: argparse.Namespace) -> int:
         args.method = DEFAULT_METHOD
     exposure = parse_exposure(args.exposure)
     _check_outputs(out, args.layers)
-    photo = io.read_photo(args.photo)  # one-line ValueError for missing, corrupt or grey-scale files
+    photo = io.read_photo(args.photo)  # one-line ValueError for missing, corrupt or palette files
     for note in photo.notes:
         print(f"physrelight: note: {args.photo}: {note}", file=sys.stderr)
     image = photo.image

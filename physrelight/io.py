@@ -260,9 +260,10 @@ def read_photo(path: str | os.PathLike) -> Photo:
     """Read a PNG/JPEG photo upright, with its field of view, for relighting.
 
     Turned by its EXIF orientation (a phone's portrait photo is stored sideways). 16-bit
-    photos are taken at 8 bits, RGBA photos give their alpha separately (a mask hint; the
-    colour is read as it is); each such step leaves a note. Grey-scale and palette images are
-    refused with a ``ValueError`` naming the mode.
+    photos are taken at 8 bits, RGBA and grey-with-alpha photos give their alpha separately (a mask
+    hint; the colour is read as it is), a grey-scale photo's one channel is read as three equal
+    ones; each such step leaves a note. Palette and bilevel images are refused with a
+    ``ValueError`` naming the mode.
     """
     from PIL import Image, ImageOps, UnidentifiedImageError
 
@@ -281,16 +282,23 @@ def read_photo(path: str | os.PathLike) -> Photo:
             mode = up.mode
             alpha = None
             if mode in ("RGBA", "LA") or (mode == "P" and "transparency" in up.info):
-                if mode != "RGBA":
+                if mode == "P":
                     raise ValueError(f"{str(p)!r} is a {mode!r} image; an RGB colour photo is needed")
                 alpha = np.asarray(up.getchannel("A"), dtype=np.float32) / 255.0
                 notes.append("its alpha channel is read apart (a mask hint), not as colour")
-                up = up.convert("RGB")
-            elif mode != "RGB":
+                up = up.convert("RGB" if mode == "RGBA" else "L")
+            if up.mode in ("L", "I", "I;16", "I;16B", "I;16L"):
+                grey = np.asarray(up)
+                if grey.dtype != np.uint8:  # 16-bit grey comes as integers up to 65535
+                    grey = np.round(np.clip(grey.astype(np.float64), 0, 65535) / 257.0).astype(np.uint8)
+                notes.append("a grey-scale photo: its one channel is read as three equal ones")
+                arr = np.repeat(grey[..., None], 3, axis=-1)
+            elif up.mode == "RGB":
+                arr = np.asarray(up)
+            else:
                 raise ValueError(f"{str(p)!r} is a {mode!r} image; an RGB colour photo is needed")
             if bits16:
                 notes.append("16-bit samples are taken at 8 bits")
-            arr = np.asarray(up)
             width, height = up.size
     except (UnidentifiedImageError, OSError) as err:
         raise ValueError(f"cannot read {str(p)!r} as an image: {err}") from None

@@ -311,6 +311,34 @@ def test_08_exif_orientation_and_focal_length_are_honoured(tmp_path) -> None:
     assert io.read_photo(tmp_path / "n.jpg").fov_deg is None and io.read_photo(tmp_path / "n.jpg").notes == []
 
 
+def test_08b_grey_scale_and_alpha_photos_are_read_with_a_note(tmp_path) -> None:
+    """A grey-scale photo (8 or 16 bits, with or without alpha) is read as three equal channels, its values
+    kept (16 bits taken at 8); an alpha channel comes apart as the mask hint; a palette image is refused."""
+    from PIL import Image
+
+    g = np.linspace(0, 255, 48 * 64).reshape(48, 64).astype(np.uint8)
+    Image.fromarray(g).save(tmp_path / "g8.png")
+    Image.fromarray(g.astype(np.uint16) * 257).save(tmp_path / "g16.png")
+    opaque = np.full_like(g, 255)
+    Image.merge("LA", [Image.fromarray(g), Image.fromarray(opaque // 2)]).save(tmp_path / "gla.png")
+    Image.fromarray(np.dstack([g, g // 2, 255 - g, opaque])).save(tmp_path / "rgba.png")
+    for name, bits16, alpha in (("g8", False, False), ("g16", True, False), ("gla", False, True)):
+        photo = io.read_photo(tmp_path / f"{name}.png")
+        assert photo.image.shape == (48, 64, 3) and photo.image.dtype == np.float32
+        np.testing.assert_array_equal(photo.image * 255, np.repeat(g[..., None], 3, axis=-1).astype(np.float32))
+        assert any("grey-scale" in n for n in photo.notes)
+        assert any("16-bit" in n for n in photo.notes) == bits16
+        assert (photo.alpha is not None) == alpha
+        if alpha:
+            np.testing.assert_allclose(photo.alpha, 127 / 255)
+    rgba = io.read_photo(tmp_path / "rgba.png")
+    np.testing.assert_array_equal(rgba.image[..., 1] * 255, (g // 2).astype(np.float32))
+    assert rgba.alpha is not None and not any("grey-scale" in n for n in rgba.notes)
+    Image.fromarray(g).convert("P").save(tmp_path / "p.png")
+    with pytest.raises(ValueError, match="'P' image"):
+        io.read_photo(tmp_path / "p.png")
+
+
 def _cli(args: list[str], capsys) -> tuple[int, str]:
     from physrelight.cli import main
 
@@ -565,6 +593,19 @@ def test_10b_an_sh_targets_default_sky_is_skygan_smoothed(relighter) -> None:
     smoothed = relighter.paint_sky(full["relit"], sky, full["working"], full["working_sky"])
     to8 = lambda x: (colour.to_ldr(x.clamp_min(0))[0].permute(1, 2, 0).numpy() * 255)  # noqa: E731
     assert roughness(to8(smoothed)) < 0.5 * roughness(to8(own))
+
+
+def test_08c_the_command_line_relights_a_grey_scale_photo_with_a_note_and_a_warning(tmp_path, capsys) -> None:
+    skimage = pytest.importorskip("skimage")
+    from PIL import Image
+
+    Image.fromarray(skimage.data.camera()[::2, ::2]).save(tmp_path / "camera.png")  # mode "L"
+    out = tmp_path / "o.png"
+    rc, err = _cli(["relight", str(tmp_path / "camera.png"), "--env", str(FOREST), "-o", str(out), "--threads", "1"],
+                   capsys)
+    assert rc == 0, err
+    assert "grey-scale photo" in err and "the photo has no colour" in err
+    assert io.read_photo(out).image.shape == (256, 256, 3)
 
 
 def test_11_the_command_lines_fitted_sky_is_the_apis(tmp_path, photo_file, capsys, relighter) -> None:
