@@ -37,6 +37,13 @@ def test_01_quick_run_writes_every_section_with_the_held_out_panorama_apart(quic
         assert title in md
     for p in report["panels"] + report["charts"]:
         assert (quick / p).is_file()
+    # (a)'s stability table: every camera variant of every crop, as figures in [0, 1], and in the report
+    from validation.bench.real_metrics import CAMERA_VARIANTS
+
+    for c in report["crops"]:
+        assert set(c["stability"]) == set(CAMERA_VARIANTS)
+        assert all(0.0 <= x <= 1.0 for v in c["stability"].values() for x in v.values())
+    assert "Stability: the same crops as another camera setting" in md and "| warm cast |" in md
 
 
 def test_02_the_ceilings_are_ceilings(quick) -> None:
@@ -97,6 +104,28 @@ def test_05_baselines_top_rows_and_otsu_brightness() -> None:
     img = np.full((10, 10, 3), 0.1)
     img[:4] = 0.9
     np.testing.assert_array_equal(real.brightness_sky(img)[:, 0], np.arange(10) < 4)
+
+
+def test_05b_camera_variants_are_what_they_say() -> None:
+    """Exposure and casts are gains on the linear photo (to 8-bit quantisation), JPEG changes it a little, the
+    noise is seeded (the same seed, the same bytes) and an unknown name is refused by name."""
+    import torch
+
+    from physrelight import colour
+    from validation.bench.real_metrics import CAMERA_VARIANTS, camera_variant
+
+    x = colour.from_ldr(torch.linspace(0.2, 0.8, 3 * 24 * 32).reshape(1, 3, 24, 32))
+    for name, gain in (("-1 EV", (0.5, 0.5, 0.5)), ("warm cast", (1.1, 1.0, 0.9)), ("cool cast", (0.9, 1.0, 1.1))):
+        y = camera_variant(x, name)
+        want = colour.to_ldr(x * torch.tensor(gain)[None, :, None, None])
+        assert float((colour.to_ldr(y) - want).abs().max()) <= 0.5 / 255 + 1e-6
+    assert 0 < float((camera_variant(x, "JPEG 50") - x).abs().mean()) < 0.02
+    a, b = camera_variant(x, "noise 2 %", seed=3), camera_variant(x, "noise 2 %", seed=3)
+    assert torch.equal(a, b) and not torch.equal(a, camera_variant(x, "noise 2 %", seed=4))
+    assert abs(float((colour.to_ldr(a) - colour.to_ldr(x)).std()) - 0.02) < 0.005
+    assert len(CAMERA_VARIANTS) == 6
+    with pytest.raises(ValueError, match="camera variant"):
+        camera_variant(x, "sepia")
 
 
 def _exr(path: Path, env: np.ndarray) -> None:

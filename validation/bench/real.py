@@ -7,6 +7,8 @@ another panorama seen through the same camera is the exact relit sky. Per crop:
 (a) **sky segmentation** at full resolution: IoU and boundary F (2 px) of the shipped
     segmenter and two baselines (the top third of the rows; pixels brighter than Otsu's
     threshold on the photo's luminance); on crops without sky, the fraction wrongly called sky;
+    the shipped mask's stability when the crop comes with another exposure, white balance,
+    compression or noise (:data:`real_metrics.CAMERA_VARIANTS`);
 (b) **lighting from the photo**: the order-2 estimate's irradiance on the unit sphere
     against the panorama's exact (brute-force) irradiance, scale-invariant (the best single
     gain, :func:`shading_error`), and its level error in stops; baselines the prior's mean
@@ -49,9 +51,9 @@ from physrelight import colour, envmap, metrics, panorama, sh
 
 from .methods import to_chw
 from .protocols import display_at_best_gain
-from .real_metrics import (BOUNDARY_TOLERANCE, ESTIMATES, PSNR_CAP, SEGMENTERS, SELF_METHODS, SKY_SOURCES,
-                           SPHERE_NORMALS, brightness_sky, dc_luminance, level_stops, shading_error, targets_for,
-                           top_rows_sky)
+from .real_metrics import (BOUNDARY_TOLERANCE, CAMERA_VARIANTS, ESTIMATES, PSNR_CAP, SEGMENTERS, SELF_METHODS,
+                           SKY_SOURCES, SPHERE_NORMALS, brightness_sky, camera_variant, dc_luminance, level_stops,
+                           shading_error, targets_for, top_rows_sky)
 
 __all__ = ["ESTIMATES", "PSNR_CAP", "REAL_LEVELS", "SEGMENTERS", "SELF_METHODS", "SKY_SOURCES", "RealLevel",
            "brightness_sky", "level_stops", "run_real_bench", "score_crop", "shading_error", "top_rows_sky"]
@@ -128,6 +130,13 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
                                   "boundary_f": metrics.boundary_f(m, crop.sky, BOUNDARY_TOLERANCE),
                                   "sky_called": float(m.mean())} for name, m in masks.items()}
     out["no_sky_reason"] = why
+    # ... and its stability: the same crop as other camera settings would have stored it
+    out["stability"] = {}
+    for v, name in enumerate(CAMERA_VARIANTS):
+        m = relighter.photo_sky(camera_variant(lin, name, seed=seed * 1000 + crop.index * 10 + v))[0][0, 0].numpy()
+        out["stability"][name] = {"iou": metrics.mask_iou(m, crop.sky),
+                                  "boundary_f": metrics.boundary_f(m, crop.sky, BOUNDARY_TOLERANCE),
+                                  "sky_called": float(m.mean())}
     pitch = estimate_pitch(seg[0, 0], crop.K)
     out["pitch"] = {"true_deg": crop.pitch_deg, "estimated_deg": pitch, "error_deg": pitch - crop.pitch_deg}
 

@@ -10,9 +10,9 @@ import numpy as np
 
 from physrelight import colour
 
-__all__ = ["BOUNDARY_TOLERANCE", "ESTIMATES", "PSNR_CAP", "SEGMENTERS", "SELF_METHODS", "SKY_SOURCES",
-           "SPHERE_NORMALS", "TOP_ROWS_FRACTION", "brightness_sky", "dc_luminance", "level_stops", "shading_error",
-           "targets_for", "top_rows_sky"]
+__all__ = ["BOUNDARY_TOLERANCE", "CAMERA_VARIANTS", "ESTIMATES", "PSNR_CAP", "SEGMENTERS", "SELF_METHODS",
+           "SKY_SOURCES", "SPHERE_NORMALS", "TOP_ROWS_FRACTION", "brightness_sky", "camera_variant", "dc_luminance",
+           "level_stops", "shading_error", "targets_for", "top_rows_sky"]
 
 SEGMENTERS = ("segmenter", "segmenter_64px", "top_rows", "brightness")
 ESTIMATES = ("proposed", "grey_world", "prior_mean", "truth_order2")
@@ -21,9 +21,42 @@ SELF_METHODS = ("quotient_known", "quotient", "proposed", "lambertian_sh", "shad
 BOUNDARY_TOLERANCE = 2.0
 SPHERE_NORMALS = 256
 TOP_ROWS_FRACTION = 1.0 / 3.0
+CAMERA_VARIANTS = ("-1 EV", "+1 EV", "warm cast", "cool cast", "JPEG 50", "noise 2 %")
+"""The other camera settings (a)'s stability table gives the same crop: exposure one stop down / up, a white
+balance cast (red x 1.1, blue x 0.9 and the reverse), JPEG at quality 50 (4:2:0) and Gaussian noise of 2 % of
+white in the display values (docs/experiments/49-sky-mask-stability.md)."""
 PSNR_CAP = 10.0 * math.log10(12.0 * 255.0**2)
 """58.9 dB: an 8-bit picture's own quantisation error (uniform, 1/255 wide); a PSNR above it means
 "exact to 8 bits", and capping it keeps means finite when a sky is rendered exactly."""
+
+
+def camera_variant(linear: Any, name: str, seed: int = 0) -> Any:
+    """The linear photo ``(1, 3, H, W)`` as another camera setting would have stored it (8-bit sRGB in and out),
+    one of :data:`CAMERA_VARIANTS`; ``seed`` draws the noise (the same seed, the same bytes)."""
+    import io
+
+    import torch
+    from PIL import Image
+
+    def to8(x: torch.Tensor) -> np.ndarray:
+        return (colour.to_ldr(x[0].clamp_min(0.0)).clamp(0, 1) * 255 + 0.5).to(torch.uint8).permute(1, 2, 0).numpy()
+
+    def from8(a: np.ndarray) -> torch.Tensor:
+        return colour.from_ldr(torch.from_numpy(a.astype(np.float32) / 255.0).permute(2, 0, 1)[None])
+
+    gains = {"-1 EV": (0.5, 0.5, 0.5), "+1 EV": (2.0, 2.0, 2.0), "warm cast": (1.1, 1.0, 0.9),
+             "cool cast": (0.9, 1.0, 1.1)}
+    if name in gains:
+        return from8(to8(linear * torch.tensor(gains[name], dtype=linear.dtype)[None, :, None, None]))
+    if name == "JPEG 50":
+        buf = io.BytesIO()
+        Image.fromarray(to8(linear)).save(buf, format="JPEG", quality=50, subsampling="4:2:0")
+        return from8(np.asarray(Image.open(io.BytesIO(buf.getvalue())).convert("RGB")))
+    if name == "noise 2 %":
+        g = torch.Generator().manual_seed(int(seed))
+        noisy = colour.to_ldr(linear.clamp_min(0.0)) + 0.02 * torch.randn(linear.shape, generator=g)
+        return from8((noisy[0].clamp(0, 1) * 255 + 0.5).to(torch.uint8).permute(1, 2, 0).numpy())
+    raise ValueError(f"camera variant must be one of {CAMERA_VARIANTS}, got {name!r}")
 
 
 def shading_error(estimate: np.ndarray, truth: np.ndarray) -> float:

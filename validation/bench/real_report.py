@@ -14,7 +14,8 @@ from physrelight import io, sh
 from physrelight.stats import hierarchical_bootstrap
 
 from ..common import jsonable, machine_line
-from .real_metrics import BOUNDARY_TOLERANCE, ESTIMATES, SEGMENTERS, SELF_METHODS, SKY_SOURCES, shading_error, targets_for
+from .real_metrics import (BOUNDARY_TOLERANCE, CAMERA_VARIANTS, ESTIMATES, SEGMENTERS, SELF_METHODS, SKY_SOURCES,
+                           shading_error, targets_for)
 
 GROUP_TITLES = {"heldout": "held out (sunrise)", "training": "training side (seen in training)",
                 "indoor": "indoor stress case (studio)", "user": "your panoramas"}
@@ -73,6 +74,10 @@ def summarise(crops: Sequence[dict[str, Any]], samples: int) -> dict[str, Any]:
                                "boundary_f": iv(main, lambda c, m=m: c["segmentation"][m]["boundary_f"]),
                                "sky_called_without_sky": iv(noskies, lambda c, m=m: c["segmentation"][m]["sky_called"])}
                            for m in SEGMENTERS}
+    out["stability"] = {v: {"iou": iv(main, lambda c, v=v: c["stability"][v]["iou"]),
+                            "boundary_f": iv(main, lambda c, v=v: c["stability"][v]["boundary_f"]),
+                            "sky_called_without_sky": iv(noskies, lambda c, v=v: c["stability"][v]["sky_called"])}
+                        for v in CAMERA_VARIANTS}
     out["lighting"] = {e: {"shading_error": iv(main, lambda c, e=e: c["lighting"][e]["shading_error"]),
                            "abs_level_stops": iv(main, lambda c, e=e: abs(c["lighting"][e]["level_stops"])),
                            "level_stops": iv(main, lambda c, e=e: c["lighting"][e]["level_stops"]),
@@ -154,6 +159,16 @@ def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
               "`segmenter_64px` is the mask it replaced (64 px, bilinear). Fraction of crops where `relight` finds no "
               "plausible sky and says so (on crops with sky / without):", ""]
     lines += _table(groups, s, ("sky_crops", "no_sky_crops"), lambda g, r: g["declined"][r], "crops")
+    lines += ["", "Stability: the same crops as another camera setting would have stored them (exposure one stop "
+              "down or up; a white-balance cast, red x 1.1 and blue x 0.9 or the reverse; JPEG quality 50; noise of "
+              "2 % of white), `segmenter` IoU, boundary F and the sky called on crops without sky:", ""]
+
+    def stability(g: dict[str, Any], row: str, key: str) -> Any:
+        return g["segmentation"]["segmenter"][key] if row == "as is" else g["stability"][row][key]
+
+    for key, title in (("iou", "IoU"), ("boundary_f", "boundary F"), ("sky_called_without_sky", "sky called without sky")):
+        lines += ["", f"{title}:", ""] if key != "iou" else []
+        lines += _table(groups, s, ("as is", *CAMERA_VARIANTS), lambda g, r, key=key: stability(g, r, key), "camera")
     lines += ["", "Pitch estimated from the sky's horizon (`learned.relighter.estimate_pitch`), error in degrees "
               "(absolute, then signed):", ""]
     lines += _table(groups, s, ("abs_error_deg", "error_deg"), lambda g, r: g["pitch"][r], "pitch", 2)
