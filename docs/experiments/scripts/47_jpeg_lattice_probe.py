@@ -8,7 +8,6 @@
 from __future__ import annotations
 
 import argparse
-import functools
 import importlib
 import io as pyio
 import json
@@ -24,13 +23,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_crop_scores import score_mask_variants  # noqa: E402
 
 from learned import Relighter  # noqa: E402
-from learned import sky_segmentation as ss  # noqa: E402
 from physrelight import colour  # noqa: E402
 
 lattice = importlib.import_module("40_lattice_sky_probe")
+masks = importlib.import_module("46_growth_gate_probe").masks  # the shipped mask with each gate
 SETTINGS = ("11.34", "16.27", "21.11", "30")
 QUALITY = 85
-_GROW = ss.grow_sky_by_colour
 
 
 def jpeg(lin: torch.Tensor, quality: int = QUALITY) -> torch.Tensor:
@@ -45,16 +43,6 @@ def jpeg(lin: torch.Tensor, quality: int = QUALITY) -> torch.Tensor:
 def jpeg_composite(crop, seed: int):
     comp, truth, cover = lattice.composite(crop, seed)
     return jpeg(comp), truth, cover
-
-
-def masks(model, lin: torch.Tensor, settings) -> dict[str, np.ndarray]:
-    """Per setting, the shipped mask with that gate."""
-    out = {}
-    for s in settings:
-        ss.grow_sky_by_colour = functools.partial(_GROW, chi2=float(s))
-        out[s] = ss.sky_mask_full_resolution(model, lin)[0][0, 0].numpy()
-    ss.grow_sky_by_colour = _GROW
-    return out
 
 
 def main() -> None:
