@@ -92,7 +92,7 @@ def test_03_sequence_writes_an_animated_gif_that_changes(photo: Path, tmp_path: 
 
 
 @pytest.mark.parametrize("make, args, match", [
-    ("grey", ["--sun", "20", "0"], "RGB colour photo"),
+    ("palette", ["--sun", "20", "0"], "RGB colour photo"),  # a grey-scale photo is read (test_relight_real 08b)
     ("corrupt", ["--sun", "20", "0"], "cannot read"),
     ("missing", ["--sun", "20", "0"], "does not exist"),
     ("ok", ["--env", "nowhere.exr"], "environment map 'nowhere.exr' does not exist"),
@@ -111,8 +111,8 @@ def test_04_bad_input_is_one_line_and_non_zero(photo: Path, tmp_path: Path, caps
     from PIL import Image
 
     src = {"ok": photo, "missing": tmp_path / "missing.png"}.get(make, tmp_path / f"{make}.png")
-    if make == "grey":
-        Image.open(photo).convert("L").save(src)
+    if make == "palette":
+        Image.open(photo).convert("P").save(src)
     elif make == "corrupt":
         src.write_bytes(b"\x89PNG\r\n\x1a\n truncated")
     small = tmp_path / "small.png"
