@@ -519,31 +519,36 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
     return torch.where(near, d_sky < d_fg, sky)
 
 
+def _local_moments(w: torch.Tensor, planes: list[torch.Tensor], r: int, min_share: float = 0.0) -> list[torch.Tensor]:
+    """The weighted means of each of ``planes`` (``(1, C_k, H, W)`` each) over the pixels of weight ``w (1, 1, H, W)``
+    (not all zero) within ``r`` of each pixel, from one box filter of the weight and every plane; where those
+    pixels fill no more than ``min_share`` of the window (none, at 0), over all of them."""
+    from physrelight.guided_filter import box_filter
+
+    weighted = [p * w for p in planes]
+    sums = box_filter(torch.cat([w, *weighted], 1), r)
+    n = sums[:, :1]
+    local, total = n > min_share, float(w.sum())
+    out, k = [], 1
+    for p in weighted:
+        c = p.shape[1]
+        out.append(torch.where(local, sums[:, k: k + c] / n.clamp_min(1e-12), p.sum((2, 3), keepdim=True) / total))
+        k += c
+    return out
+
+
 def _local_mean(w: torch.Tensor, v: torch.Tensor, r: int, min_share: float = 0.0) -> torch.Tensor:
     """``(1, C, H, W)`` mean of ``v (1, C, H, W)`` over the pixels of weight ``w (1, 1, H, W)`` (not all
     zero) within ``r`` of each pixel; where they fill no more than ``min_share`` of that window (none, at 0),
-    over all of them."""
-    from physrelight.guided_filter import box_filter
-
-    n = box_filter(w, r)
-    overall = (v * w).sum((2, 3), keepdim=True) / float(w.sum())
-    return torch.where(n > min_share, box_filter(v * w, r) / n.clamp_min(1e-12), overall)
+    over all of them (:func:`_local_moments`)."""
+    return _local_moments(w, [v], r, min_share)[0]
 
 
 def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int, min_share: float = 0.0) -> torch.Tensor:
     """``(1, 1, H, W)`` negative log-likelihood (times 2, up to a constant) of each pixel of ``x (1, C, H, W)``
-    under the diagonal Gaussian of the pixels ``w`` near it (:func:`_local_mean`; variance floor
-    :data:`VARIANCE_FLOOR`)."""
-    from physrelight.guided_filter import box_filter
-
-    # :func:`_local_mean` of x and of x^2, with the window's weight, in one box filter of 2C + 1 planes (one
-    # window count instead of four, and each moment's sums once): the same sums, divided the same way
-    c = x.shape[1]
-    sums = box_filter(torch.cat([w, x * w, x * x * w], 1), r)
-    n, local = sums[:, :1], sums[:, :1] > min_share
-    total = float(w.sum())
-    mu = torch.where(local, sums[:, 1: 1 + c] / n.clamp_min(1e-12), (x * w).sum((2, 3), keepdim=True) / total)
-    ex2 = torch.where(local, sums[:, 1 + c:] / n.clamp_min(1e-12), (x * x * w).sum((2, 3), keepdim=True) / total)
+    under the diagonal Gaussian of the pixels ``w`` near it (:func:`_local_moments` of ``x`` and ``x^2`` in one
+    box filter; variance floor :data:`VARIANCE_FLOOR`)."""
+    mu, ex2 = _local_moments(w, [x, x * x], r, min_share)
     var = (ex2 - mu * mu).clamp_min(0) + VARIANCE_FLOOR
     return ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
 

@@ -38,8 +38,11 @@ def camera_variant(linear: Any, name: str, seed: int = 0) -> Any:
     import torch
     from PIL import Image
 
+    def quantise(display: torch.Tensor) -> np.ndarray:  # (3, H, W) display values -> (H, W, 3) uint8
+        return (display.clamp(0, 1) * 255 + 0.5).to(torch.uint8).permute(1, 2, 0).numpy()
+
     def to8(x: torch.Tensor) -> np.ndarray:
-        return (colour.to_ldr(x[0].clamp_min(0.0)).clamp(0, 1) * 255 + 0.5).to(torch.uint8).permute(1, 2, 0).numpy()
+        return quantise(colour.to_ldr(x[0].clamp_min(0.0)))
 
     def from8(a: np.ndarray) -> torch.Tensor:
         return colour.from_ldr(torch.from_numpy(a.astype(np.float32) / 255.0).permute(2, 0, 1)[None])
@@ -55,7 +58,7 @@ def camera_variant(linear: Any, name: str, seed: int = 0) -> Any:
     if name == "noise 2 %":
         g = torch.Generator().manual_seed(int(seed))
         noisy = colour.to_ldr(linear.clamp_min(0.0)) + 0.02 * torch.randn(linear.shape, generator=g)
-        return from8((noisy[0].clamp(0, 1) * 255 + 0.5).to(torch.uint8).permute(1, 2, 0).numpy())
+        return from8(quantise(noisy[0]))
     raise ValueError(f"camera variant must be one of {CAMERA_VARIANTS}, got {name!r}")
 
 
