@@ -257,6 +257,9 @@ COLOUR_MIN_BLUE_OVER_RED = 0.85
 0.9 to refuse the mottled studio backdrop of scikit-image's astronaut, blue/red 0.859 under it; that
 segmenter was not kept, and under the shipped one the backdrop is refused at 0.85.)"""
 SMOOTHNESS_MAX_RATIO = 0.5
+SMOOTHNESS_NOISE_AWARE = True
+"""Whether :func:`plausible_sky`'s smoothness test takes each pixel's expected noise out of the roughness
+(:func:`sky_roughness`; docs/experiments/50-noise-aware-smoothness.md). False: the plain roughness, as before."""
 MIN_SKY_FRACTION = 0.01
 BAND_WORKING_PIXELS = 6
 """How far (in working pixels) from the upsampled boundary pixels are decided by colour
@@ -329,6 +332,39 @@ def _roughness(lum: torch.Tensor) -> torch.Tensor:
     return (box_filter(ly * ly, 1) - m * m).clamp_min(0).sqrt()[0, 0]
 
 
+def log_noise_sigma(lum: torch.Tensor) -> torch.Tensor:
+    """The photo's noise at each pixel of linear luminance ``lum (H, W)``, in log luminance: ``(H, W)``.
+
+    Noise in a stored photo (the sensor's after the camera's curve, JPEG's) is about even in *display* values, so
+    in log luminance it is larger where the photo is darker: ``sigma_d / (d display / d log lum)``, with
+    ``sigma_d`` the noise floor of the display luminance (:func:`physrelight.denoise.noise_sigma`) and the slope of
+    :func:`physrelight.colour.to_ldr` taken numerically. Where the display clips the slope is 0 and the noise
+    infinite (a clipped patch has no noise left to see).
+    """
+    from physrelight.denoise import noise_sigma
+
+    y = lum.clamp_min(1e-4)
+    sigma_d = noise_sigma(colour.to_ldr(y)[None, None])[0, 0]
+    h = 1e-3  # central difference in log luminance
+    slope = (colour.to_ldr(y * math.exp(h)) - colour.to_ldr(y * math.exp(-h))) / (2.0 * h)
+    return torch.where(slope > 0, sigma_d / slope.clamp_min(1e-12), torch.full_like(y, math.inf))
+
+
+def sky_roughness(lum: torch.Tensor, noise_aware: bool = True) -> torch.Tensor:
+    """``(H, W)`` roughness of linear luminance ``lum (H, W)`` for :func:`plausible_sky`'s smoothness test.
+
+    The standard deviation of log luminance over 3 x 3 pixels; with ``noise_aware``, less the photo's noise
+    (:func:`log_noise_sigma`): ``sqrt(max(r^2 - 8/9 s^2, 0))``, 8/9 being the expected 3 x 3 variance (over 9, not 8)
+    of unit white noise. Without it a small noisy photo's sky is as rough as its foreground and refused (study 50:
+    rocket.jpg at 160 px with 2 % noise); a photo without noise keeps the plain roughness.
+    """
+    r = _roughness(lum)
+    if not noise_aware:
+        return r
+    s = log_noise_sigma(lum)
+    return (r * r - (8.0 / 9.0) * s * s).clamp_min(0.0).sqrt()
+
+
 def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor, str]:
     """Keep the parts of a sky mask that are a sky, and say why when none is.
 
@@ -336,8 +372,9 @@ def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor
     when it touches the top border, or when it is as bright as the top-touching sky (median
     luminance at least half of it) and as blue (blue/red at least 0.9 of it): sky between towers
     or branches. The kept sky is then judged a sky when it covers at least 1 % of the photo, is
-    sky-coloured (median blue/red >= 0.9: blue, grey or white, not a warm wall, a face or a
-    cup) and smooth (median 3 x 3 roughness of log luminance at most half the foreground's).
+    sky-coloured (median blue/red >= :data:`COLOUR_MIN_BLUE_OVER_RED`: blue, grey or white, not a warm wall, a face or a
+    cup) and smooth (median 3 x 3 roughness of log luminance, less the photo's noise, at most half the
+    foreground's: :func:`sky_roughness`).
 
     Returns:
         ``(kept (H, W) bool, reason)``; ``reason`` is ``""`` for a plausible sky, else one line
@@ -363,7 +400,7 @@ def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor
     if colour_ratio < COLOUR_MIN_BLUE_OVER_RED:
         return torch.zeros_like(mask), (f"the region found at the top is not sky-coloured (blue/red {colour_ratio:.3f}, "
                                         f"a sky has >= {COLOUR_MIN_BLUE_OVER_RED})")
-    rough = _roughness(lum)
+    rough = sky_roughness(lum, SMOOTHNESS_NOISE_AWARE)
     fg = ~kept
     if bool(fg.any()):
         r_sky, r_fg = float(rough[kept].median()), float(rough[fg].median())

@@ -230,6 +230,78 @@ def test_06b_a_black_and_white_photo_gets_a_warning_about_its_sky_mask(relighter
     assert not [w for w in caught if "no colour" in str(w.message)]
 
 
+def _with_display_noise(photo: np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    """uint8 ``photo`` with Gaussian noise of ``sigma`` (display values) added and stored again in 8 bits."""
+    rng = np.random.default_rng(seed)
+    noisy = photo / 255.0 + sigma * rng.standard_normal(photo.shape)
+    return (np.clip(noisy, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
+
+
+@pytest.mark.parametrize("display", [0.15, 0.5, 0.9])
+def test_06c_the_smoothness_tests_roughness_takes_the_noise_out(display) -> None:
+    """On a flat patch of display value ``display`` with white display noise (sd 0.02), the 3 x 3 roughness of log
+    luminance is the noise, brought to log luminance by the display curve's slope there (a z-test of its mean
+    square against 8/9 of the predicted variance), and :func:`sky_roughness` takes it out: its median is 0. A
+    textured patch beside a noiseless flat one keeps its roughness."""
+    from learned.sky_segmentation import _roughness, log_noise_sigma, sky_roughness
+
+    g = torch.Generator().manual_seed(int(display * 100))
+    d = (display + 0.02 * torch.randn(96, 96, generator=g)).clamp(0, 1)
+    lum = colour.from_ldr(d)
+    s = log_noise_sigma(lum)
+    y = float(colour.from_ldr(torch.tensor(display)))
+    dlog_ddisplay = 2 * math.log(1.001) / float(colour.to_ldr(torch.tensor(y * 1.001)) - colour.to_ldr(torch.tensor(y / 1.001)))
+    sigma_log = 0.02 * dlog_ddisplay  # the display noise in log luminance at this brightness
+    assert abs(float(s.median()) / sigma_log - 1.0) < 0.15
+    r2 = _roughness(lum)[1:-1, 1:-1] ** 2  # interior windows: 9 pixels each
+    expected = 8.0 / 9.0 * sigma_log ** 2
+    # windows overlap: use every third one in each direction (independent), about 1000 of them
+    sample = r2[::3, ::3].flatten().double()
+    z = (float(sample.mean()) - expected) / (float(sample.std()) / math.sqrt(sample.numel()))
+    assert abs(z) < 4.0
+    assert float(sky_roughness(lum).median()) == 0.0
+    assert float(sky_roughness(lum, noise_aware=False).median()) > 0.5 * math.sqrt(expected)
+    tex = torch.ones(96, 96) * 0.5
+    tex[:, 48:] = torch.exp(torch.empty(96, 48).uniform_(-1.0, 1.0, generator=g)) * 0.2
+    assert torch.allclose(sky_roughness(tex)[:, 50:], _roughness(tex)[:, 50:])
+
+
+def test_06d_a_small_noisy_photo_keeps_its_sky_and_a_textured_top_stays_refused(relighter) -> None:
+    """rocket.jpg at 160 px with noise of 2 % of white: at the 128-px working size the noise is not averaged away,
+    and with the plain roughness its dark sky was as rough as its foreground and refused (study 50). With the
+    noise taken out it keeps a sky. Under the same noise, a blue but textured top region (a tiled wall) over a
+    calmer ground is still refused as textured, and a smooth one is kept."""
+    skimage = pytest.importorskip("skimage")
+    from PIL import Image
+
+    import learned.sky_segmentation as ss
+
+    small = np.asarray(Image.fromarray(skimage.data.rocket()).resize((160, 107), Image.LANCZOS))
+    lin = colour.from_ldr(torch.from_numpy(_with_display_noise(small, 0.02, 0)).permute(2, 0, 1)[None].float() / 255)
+    sky, why = relighter.photo_sky(lin)
+    assert why == "" and float(sky.float().mean()) > 0.3
+    try:
+        ss.SMOOTHNESS_NOISE_AWARE = False
+        sky0, why0 = relighter.photo_sky(lin)
+    finally:
+        ss.SMOOTHNESS_NOISE_AWARE = True
+    assert "textured" in why0 and not bool(sky0.any())
+
+    rng = np.random.default_rng(3)
+    h, w = 96, 128
+    top = np.zeros((h, w), dtype=bool)
+    top[:40] = True
+    ground = np.array([0.45, 0.40, 0.30]) * np.exp(0.15 * rng.uniform(-1, 1, (h, w, 1)))
+    for texture, kept in ((0.0, True), (0.6, False)):
+        wall = np.array([0.45, 0.55, 0.75]) * np.exp(texture * rng.uniform(-1, 1, (h, w, 1)))
+        photo = (np.where(top[..., None], wall, ground).clip(0, 1) * 255 + 0.5).astype(np.uint8)
+        lin = colour.from_ldr(torch.from_numpy(_with_display_noise(photo, 0.02, 4)).permute(2, 0, 1).float() / 255)
+        sky, why = ss.plausible_sky(torch.from_numpy(top), lin)
+        assert bool(sky.any()) == kept and (why == "") == kept
+        if not kept:
+            assert "textured" in why
+
+
 def test_07_the_rocket_has_a_sky_and_its_towers_stay(relighter) -> None:
     skimage = pytest.importorskip("skimage")
     photo = skimage.data.rocket()

@@ -1,5 +1,5 @@
 """Study 50 (exploration, training side): the smoothness test with each pixel's expected display-value noise
-taken out of the log-luminance roughness, against today's, on the training crops (as is, 2 % noise, JPEG 50, the
+taken out of the log-luminance roughness (``SMOOTHNESS_NOISE_AWARE``), against the plain roughness, on the training crops (as is, 2 % noise, JPEG 50, the
 lattice set), the indoor photos and rocket.jpg at 640, 320 and 160 px.
 
     .venv/bin/python docs/experiments/scripts/50_noise_aware_roughness_probe.py
@@ -13,26 +13,14 @@ from validation.bench.real_metrics import camera_variant
 from learned import Relighter
 import learned.sky_segmentation as ss
 from physrelight import colour
-from physrelight.denoise import noise_sigma
 torch.set_num_threads(2)
 model=Relighter.load().sky_segmenter
-_R=ss._roughness
-def noise_aware(lum):
-    r=_R(lum)
-    l=lum.clamp_min(1e-4)
-    d=colour.to_ldr(l)
-    s=float(noise_sigma(d[None,None])[0,0])
-    # d display / d log lum, numerically
-    eps=1e-3
-    slope=(colour.to_ldr(l*np.exp(eps))-colour.to_ldr(l*np.exp(-eps)))/(2*eps)
-    slog=s/slope.clamp_min(1e-6)
-    return (r*r-(8/9)*slog*slog).clamp_min(0).sqrt()
 def masks(lin):
     out={}
-    for name,f in (('today',_R),('noise_aware',noise_aware)):
-        ss._roughness=f
+    for name,flag in (('today',False),('noise_aware',True)):
+        ss.SMOOTHNESS_NOISE_AWARE=flag
         out[name]=ss.sky_mask_full_resolution(model, lin)[0][0,0].numpy()
-    ss._roughness=_R
+    ss.SMOOTHNESS_NOISE_AWARE=True
     return out
 for v in ('as is','noise 2 %','JPEG 50'):
     print('--',v, flush=True)
