@@ -260,6 +260,10 @@ SMOOTHNESS_MAX_RATIO = 0.5
 SMOOTHNESS_NOISE_AWARE = True
 """Whether :func:`plausible_sky`'s smoothness test takes each pixel's expected noise out of the roughness
 (:func:`sky_roughness`; docs/experiments/50-noise-aware-smoothness.md). False: the plain roughness, as before."""
+SMOOTHNESS_NOISE_AT_OWN_SIZE = True
+"""Whether that noise is read off the photo at its own size and carried through the resizing to the working size
+(:func:`resized_noise_roughness`), rather than read off the working image, where an enlarged small photo's noise is
+spread over neighbouring pixels and mostly missed (study 50, round 2)."""
 MIN_SKY_FRACTION = 0.01
 BAND_WORKING_PIXELS = 6
 """How far (in working pixels) from the upsampled boundary pixels are decided by colour
@@ -332,40 +336,76 @@ def _roughness(lum: torch.Tensor) -> torch.Tensor:
     return (box_filter(ly * ly, 1) - m * m).clamp_min(0).sqrt()[0, 0]
 
 
-def log_noise_sigma(lum: torch.Tensor) -> torch.Tensor:
+def log_noise_sigma(lum: torch.Tensor, sigma_d: float | torch.Tensor | None = None) -> torch.Tensor:
     """The photo's noise at each pixel of linear luminance ``lum (H, W)``, in log luminance: ``(H, W)``.
 
     Noise in a stored photo (the sensor's after the camera's curve, JPEG's) is about even in *display* values, so
     in log luminance it is larger where the photo is darker: ``sigma_d / (d display / d log lum)``, with
-    ``sigma_d`` the noise floor of the display luminance (:func:`physrelight.denoise.noise_sigma`) and the slope of
-    :func:`physrelight.colour.to_ldr` taken numerically. Where the display clips the slope is 0 and the noise
-    infinite (a clipped patch has no noise left to see).
+    ``sigma_d`` the noise of the display luminance (given, or the noise floor of ``lum``'s:
+    :func:`physrelight.denoise.noise_sigma`) and the slope of :func:`physrelight.colour.to_ldr` taken
+    numerically. Where the display clips the slope is 0 and the noise infinite (a clipped patch has no noise left
+    to see).
     """
-    from physrelight.denoise import noise_sigma
-
     y = lum.clamp_min(1e-4)
-    sigma_d = noise_sigma(colour.to_ldr(y)[None, None])[0, 0]
+    if sigma_d is None:
+        sigma_d = display_noise_sigma(y)
     h = 1e-3  # central difference in log luminance
     slope = (colour.to_ldr(y * math.exp(h)) - colour.to_ldr(y * math.exp(-h))) / (2.0 * h)
     return torch.where(slope > 0, sigma_d / slope.clamp_min(1e-12), torch.full_like(y, math.inf))
 
 
-def sky_roughness(lum: torch.Tensor, noise_aware: bool = True) -> torch.Tensor:
+def display_noise_sigma(lum: torch.Tensor) -> torch.Tensor:
+    """The noise floor (:func:`physrelight.denoise.noise_sigma`) of the display luminance of linear ``lum (H, W)``:
+    a 0-d tensor, in display values."""
+    from physrelight.denoise import noise_sigma
+
+    return noise_sigma(colour.to_ldr(lum.clamp_min(1e-4))[None, None])[0, 0]
+
+
+def resized_noise_roughness(size: tuple[int, int], working: tuple[int, int]) -> float:
+    """The expected squared 3 x 3 roughness (variance over 9 pixels) of unit white noise at ``size (H, W)`` once
+    resized to ``working (h, w)`` as :func:`learned.data.resize_short_side` does: 8/9 without resizing.
+
+    Enlarged bilinearly, each noise sample spreads over its neighbours, so a small photo's noise looks smoother at
+    the working size than it is, and the noise floor read there misses most of it (study 50: a third). Measured on
+    seeded noise (a patch of at most 1024 x 1024 at the same scale), so the same sizes give the same number.
+    """
+    if tuple(size) == tuple(working):
+        return 8.0 / 9.0
+    from physrelight.guided_filter import box_filter
+
+    ph, pw = min(size[0], 1024), min(size[1], 1024)
+    oh, ow = max(3, round(ph * working[0] / size[0])), max(3, round(pw * working[1] / size[1]))
+    g = torch.Generator().manual_seed(0)
+    n = torch.randn(1, 1, ph, pw, generator=g, dtype=torch.float64)
+    if oh * ow < ph * pw:
+        y = F.interpolate(n, size=(oh, ow), mode="area")
+    else:
+        y = F.interpolate(n, size=(oh, ow), mode="bilinear", align_corners=False)
+    m = box_filter(y, 1)
+    var = (box_filter(y * y, 1) - m * m)[0, 0, 1:-1, 1:-1]
+    return float(var.mean())
+
+
+def sky_roughness(lum: torch.Tensor, noise_aware: bool = True, noise_var: torch.Tensor | None = None) -> torch.Tensor:
     """``(H, W)`` roughness of linear luminance ``lum (H, W)`` for :func:`plausible_sky`'s smoothness test.
 
-    The standard deviation of log luminance over 3 x 3 pixels; with ``noise_aware``, less the photo's noise
-    (:func:`log_noise_sigma`): ``sqrt(max(r^2 - 8/9 s^2, 0))``, 8/9 being the expected 3 x 3 variance (over 9, not 8)
-    of unit white noise. Without it a small noisy photo's sky is as rough as its foreground and refused (study 50:
-    rocket.jpg at 160 px with 2 % noise); a photo without noise keeps the plain roughness.
+    The standard deviation of log luminance over 3 x 3 pixels; with ``noise_aware``, less the photo's noise:
+    ``sqrt(max(r^2 - v, 0))``, ``v (H, W)`` the squared roughness the noise alone would give (``noise_var``; by
+    default ``8/9 s^2`` with ``s`` from :func:`log_noise_sigma`, 8/9 being the expected 3 x 3 variance, over 9 and
+    not 8, of unit white noise). Without it a small noisy photo's sky is as rough as its foreground and refused
+    (study 50: rocket.jpg at 160 px with 2 % noise); a photo without noise keeps the plain roughness.
     """
     r = _roughness(lum)
     if not noise_aware:
         return r
-    s = log_noise_sigma(lum)
-    return (r * r - (8.0 / 9.0) * s * s).clamp_min(0.0).sqrt()
+    if noise_var is None:
+        noise_var = (8.0 / 9.0) * log_noise_sigma(lum) ** 2
+    return (r * r - noise_var).clamp_min(0.0).sqrt()
 
 
-def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor, str]:
+def plausible_sky(mask: torch.Tensor, image: torch.Tensor,
+                  noise_var: torch.Tensor | None = None) -> tuple[torch.Tensor, str]:
     """Keep the parts of a sky mask that are a sky, and say why when none is.
 
     A sky component (8-connected, of ``mask (H, W)`` bool on linear ``image (3, H, W)``) is kept
@@ -374,7 +414,8 @@ def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor
     or branches. The kept sky is then judged a sky when it covers at least 1 % of the photo, is
     sky-coloured (median blue/red >= :data:`COLOUR_MIN_BLUE_OVER_RED`: blue, grey or white, not a warm wall, a face or a
     cup) and smooth (median 3 x 3 roughness of log luminance, less the photo's noise, at most half the
-    foreground's: :func:`sky_roughness`).
+    foreground's: :func:`sky_roughness`; ``noise_var (H, W)``, the squared roughness the photo's noise alone
+    gives at each pixel, when the caller knows it better than ``image`` shows, as for a resized photo).
 
     Returns:
         ``(kept (H, W) bool, reason)``; ``reason`` is ``""`` for a plausible sky, else one line
@@ -400,7 +441,7 @@ def plausible_sky(mask: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor
     if colour_ratio < COLOUR_MIN_BLUE_OVER_RED:
         return torch.zeros_like(mask), (f"the region found at the top is not sky-coloured (blue/red {colour_ratio:.3f}, "
                                         f"a sky has >= {COLOUR_MIN_BLUE_OVER_RED})")
-    rough = sky_roughness(lum, SMOOTHNESS_NOISE_AWARE)
+    rough = sky_roughness(lum, SMOOTHNESS_NOISE_AWARE, noise_var)
     fg = ~kept
     if bool(fg.any()):
         r_sky, r_fg = float(rough[kept].median()), float(rough[fg].median())
@@ -470,7 +511,14 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor,
                             else torch.sigmoid(model(x)) for x in smalls]).mean(0)
     masks, reasons = [], []
     for b in range(image.shape[0]):
-        kept, why = plausible_sky(prob[b, 0] > threshold, small[b])
+        noise_var = None
+        if SMOOTHNESS_NOISE_AWARE and SMOOTHNESS_NOISE_AT_OWN_SIZE:
+            # the noise is read off the photo as it came, and carried through the resizing to the working size
+            sigma_d = display_noise_sigma((image[b] * image.new_tensor(_LUMA)[:, None, None]).sum(0))
+            lum_small = (small[b] * small.new_tensor(_LUMA)[:, None, None]).sum(0)
+            gain = resized_noise_roughness(tuple(image.shape[-2:]), tuple(small.shape[-2:]))
+            noise_var = gain * log_noise_sigma(lum_small, sigma_d.to(lum_small.dtype)) ** 2
+        kept, why = plausible_sky(prob[b, 0] > threshold, small[b], noise_var)
         reasons.append(why)
         p = (prob[b, 0] * kept)[None, None]  # the rejected parts' probability is 0
         if not bool(kept.any()):
