@@ -266,26 +266,65 @@ def test_06c_the_smoothness_tests_roughness_takes_the_noise_out(display) -> None
     assert torch.allclose(sky_roughness(tex)[:, 50:], _roughness(tex)[:, 50:])
 
 
+@pytest.mark.parametrize("size, working", [((96, 96), (96, 96)), ((96, 128), (24, 32)), ((120, 180), (40, 60)),
+                                           ((80, 120), (128, 192)), ((100, 150), (128, 192))])
+def test_06e_the_noise_roughness_after_resizing_is_the_resized_noises(size, working) -> None:
+    """:func:`resized_noise_roughness` against brute force: fresh white noise (another seed, several draws) resized
+    as :func:`learned.data.resize_short_side` does, its mean 3 x 3 variance within 5 %. Unresized it is 8/9, and
+    area-shrunk by an integer factor f it is 8/9 / f^2 (independent means of f^2 samples), exactly as stated."""
+    from learned.data import resize_short_side
+    from learned.sky_segmentation import resized_noise_roughness
+    from physrelight.guided_filter import box_filter
+
+    gain = resized_noise_roughness(size, working)
+    g = torch.Generator().manual_seed(11)
+    draws = []
+    for _ in range(8):
+        y = resize_short_side(torch.randn(1, 1, *size, generator=g, dtype=torch.float64), min(working))
+        assert tuple(y.shape[-2:]) == working
+        m = box_filter(y, 1)
+        draws.append(float((box_filter(y * y, 1) - m * m)[0, 0, 1:-1, 1:-1].mean()))
+    assert abs(gain / float(np.mean(draws)) - 1.0) < 0.05
+    if size == working:
+        assert gain == 8.0 / 9.0
+    elif size[0] % working[0] == 0 and size[0] // working[0] == size[1] // working[1]:
+        f = size[0] // working[0]
+        assert abs(gain / (8.0 / 9.0 / f ** 2) - 1.0) < 0.05
+
+
 def test_06d_a_small_noisy_photo_keeps_its_sky_and_a_textured_top_stays_refused(relighter) -> None:
-    """rocket.jpg at 160 px with noise of 2 % of white: at the 128-px working size the noise is not averaged away,
-    and with the plain roughness its dark sky was as rough as its foreground and refused (study 50). With the
-    noise taken out it keeps a sky. Under the same noise, a blue but textured top region (a tiled wall) over a
+    """rocket.jpg at 160 and 120 px with noise of 2 % of white: at the 128-px working size the noise is not averaged
+    away, and with the plain roughness its dark sky was as rough as its foreground and refused (study 50). With the
+    photo's own noise taken out (read at its own size and carried through the enlargement) it keeps a sky. Under the same noise, a blue but textured top region (a tiled wall) over a
     calmer ground is still refused as textured, and a smooth one is kept."""
     skimage = pytest.importorskip("skimage")
     from PIL import Image
 
     import learned.sky_segmentation as ss
 
-    small = np.asarray(Image.fromarray(skimage.data.rocket()).resize((160, 107), Image.LANCZOS))
-    lin = colour.from_ldr(torch.from_numpy(_with_display_noise(small, 0.02, 0)).permute(2, 0, 1)[None].float() / 255)
-    sky, why = relighter.photo_sky(lin)
-    assert why == "" and float(sky.float().mean()) > 0.3
-    try:
-        ss.SMOOTHNESS_NOISE_AWARE = False
-        sky0, why0 = relighter.photo_sky(lin)
-    finally:
-        ss.SMOOTHNESS_NOISE_AWARE = True
+    def noisy_rocket(width: int) -> torch.Tensor:
+        small = np.asarray(Image.fromarray(skimage.data.rocket()).resize((width, round(width * 427 / 640)), Image.LANCZOS))
+        return colour.from_ldr(torch.from_numpy(_with_display_noise(small, 0.02, 0)).permute(2, 0, 1)[None].float() / 255)
+
+    def mask_with(lin: torch.Tensor, **switches: bool) -> tuple[torch.Tensor, str]:
+        saved = {k: getattr(ss, k) for k in switches}
+        try:
+            for k, v in switches.items():
+                setattr(ss, k, v)
+            return relighter.photo_sky(lin)
+        finally:
+            for k, v in saved.items():
+                setattr(ss, k, v)
+
+    for width in (160, 120):
+        sky, why = relighter.photo_sky(noisy_rocket(width))
+        assert why == "" and float(sky.float().mean()) > 0.2
+    # at 160 px (enlarged to 128 x 192) the noise read at the working size is enough; the plain roughness is not
+    sky0, why0 = mask_with(noisy_rocket(160), SMOOTHNESS_NOISE_AWARE=False)
     assert "textured" in why0 and not bool(sky0.any())
+    # at 120 px (enlarged by 1.6) the working image's noise is spread and under-read: it needs the photo's own
+    sky1, why1 = mask_with(noisy_rocket(120), SMOOTHNESS_NOISE_AT_OWN_SIZE=False)
+    assert "textured" in why1 and not bool(sky1.any())
 
     rng = np.random.default_rng(3)
     h, w = 96, 128
