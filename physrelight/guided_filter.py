@@ -38,15 +38,18 @@ def _check(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> N
 def _window_sums(x: torch.Tensor, radius: int, dim: int) -> torch.Tensor:
     """Sums of ``x`` over ``[i - r, i + r]`` along ``dim``, the window cut at the ends (cumulative sums: O(1) per pixel)."""
     n = x.shape[dim]
-    c = torch.cumsum(x, dim=dim)
-    zero = torch.zeros_like(c.narrow(dim, 0, 1))
-    c = torch.cat([zero, c], dim=dim).movedim(dim, -1)  # c[..., k] = sum of the first k, k = 0..n
-    # c[min(i + r + 1, n)] - c[max(i - r, 0)] for i = 0..n-1, by slicing (index_select is several times slower):
-    # the last r upper ends repeat c[n], the first r lower ends are c[0] = 0.
+    c = torch.cumsum(x, dim=dim)  # c[k] = x[0] + ... + x[k]
     r = min(radius, n)
-    upper = torch.cat([c[..., r + 1:], c[..., -1:].expand(*c.shape[:-1], r)], dim=-1)
-    lower = torch.cat([c[..., :1].expand(*c.shape[:-1], r), c[..., : n - r]], dim=-1)
-    return (upper - lower).movedim(-1, dim)
+    # sum = c[min(i + r, n - 1)] - c[i - r - 1] (0 for i <= r), written in place into one output by slicing: no
+    # padded copy of c and no concatenation (twice as fast on a 12-megapixel image as building both ends by cat)
+    out = torch.empty_like(c)
+    if n - r > 0:
+        out.narrow(dim, 0, n - r).copy_(c.narrow(dim, r, n - r))
+    tail = out.narrow(dim, n - r, r)
+    tail.copy_(c.narrow(dim, n - 1, 1).expand_as(tail))
+    if n - r - 1 > 0:
+        out.narrow(dim, r + 1, n - r - 1).sub_(c.narrow(dim, 0, n - r - 1))
+    return out
 
 
 _POOL_MAX_RADIUS = 16
@@ -58,8 +61,8 @@ def box_filter(x: torch.Tensor, radius: int) -> torch.Tensor:
     border (the mean of the pixels inside the image, not of zero padding). Small radii average
     directly, a row pass then a column pass (the count of a window cut at the border factorises, so
     the separable mean is exact); wide ones use summed-area tables, whose cost does not grow with
-    ``radius`` (at small radii about twice as slow: 3.1 s against 1.4 s for three channels of a
-    12-megapixel image at radius 2, one thread)."""
+    ``radius`` (at small radii slower: 1.0 s against 0.7 s for three channels of a 12-megapixel image at
+    radius 2, one thread, 2-core AMD EPYC)."""
     if radius <= _POOL_MAX_RADIUS:
         k = 2 * radius + 1
         rows = F.avg_pool2d(x, (1, k), stride=1, padding=(0, radius), count_include_pad=False)

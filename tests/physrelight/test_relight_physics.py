@@ -69,6 +69,23 @@ def test_04_guided_filter_keeps_constants_and_affine_functions_of_the_guide() ->
     torch.testing.assert_close(box[0, 0], brute)
 
 
+@pytest.mark.parametrize("shape", [(2, 3, 37, 53), (1, 1, 5, 90), (1, 2, 64, 3)])
+@pytest.mark.parametrize("radius", [17, 26, 52, 200])
+def test_04b_the_summed_area_box_filter_is_the_direct_mean(shape, radius) -> None:
+    """Past ``_POOL_MAX_RADIUS`` the box filter uses summed-area tables (cumulative sums sliced in place); it is
+    the direct mean of the pixels inside the image (two cut-at-the-border pools) to rounding, windows wider than
+    the image included (every pixel sees the whole row or column)."""
+    g = torch.Generator().manual_seed(radius)
+    x = torch.randn(*shape, generator=g, dtype=torch.float64)
+    k = 2 * radius + 1
+    rows = torch.nn.functional.avg_pool2d(x, (1, k), stride=1, padding=(0, radius), count_include_pad=False)
+    direct = torch.nn.functional.avg_pool2d(rows, (k, 1), stride=1, padding=(radius, 0), count_include_pad=False)
+    assert torch.allclose(guided_filter.box_filter(x, radius), direct, atol=1e-12, rtol=0)
+    if radius >= max(shape[-2:]):
+        assert torch.allclose(guided_filter.box_filter(x, radius), x.mean((-2, -1), keepdim=True).expand_as(x),
+                              atol=1e-12, rtol=0)
+
+
 def test_05_guided_upsampling_keeps_a_step_edge_within_one_pixel() -> None:
     """A mask brought up 8x from a working resolution, guided by the full-resolution photo's step:
     its 1/2 crossing lands within a pixel of the photo's edge."""
