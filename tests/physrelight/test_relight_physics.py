@@ -86,6 +86,17 @@ def test_04b_the_summed_area_box_filter_is_the_direct_mean(shape, radius) -> Non
                               atol=1e-12, rtol=0)
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_04c_the_box_filters_cumulative_sums_are_torchs_to_the_bit(dtype) -> None:
+    """The summed-area path's running sums along columns are added a row at a time (torch's kernel is slow there);
+    they equal ``torch.cumsum`` exactly, along every dimension of several shapes (float64 accumulation, as torch's)."""
+    g = torch.Generator().manual_seed(5)
+    for shape in [(1, 3, 97, 61), (2, 1, 5, 3), (1, 1, 1, 9), (4, 7)]:
+        x = torch.randn(*shape, generator=g, dtype=dtype) * 100
+        for d in range(-len(shape), len(shape)):
+            assert torch.equal(guided_filter._cumsum(x, d), torch.cumsum(x, d))
+
+
 def test_05_guided_upsampling_keeps_a_step_edge_within_one_pixel() -> None:
     """A mask brought up 8x from a working resolution, guided by the full-resolution photo's step:
     its 1/2 crossing lands within a pixel of the photo's edge."""
