@@ -648,6 +648,8 @@ def _local_gaussian_nll_at(x: torch.Tensor, w: torch.Tensor, r: int, index: torc
     ``r`` and the statistics are computed only where they are asked for (the growth asks at its few candidates,
     while a window of ``4 * reach`` spans most of a large photo). The tables are float64, built one plane at a time
     (each about 0.2 GB for a 24-megapixel photo). ``x (1, C, H, W)``, ``w (1, 1, H, W)``."""
+    from physrelight.guided_filter import cumsum
+
     c, h, wd = x.shape[1], x.shape[-2], x.shape[-1]
     iy, ix = index // wd, index % wd
     y0, y1 = (iy - r).clamp_min(0), (iy + r + 1).clamp_max(h)
@@ -656,7 +658,7 @@ def _local_gaussian_nll_at(x: torch.Tensor, w: torch.Tensor, r: int, index: torc
 
     def window_sums(plane: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The sums of ``plane (H, W)`` over the windows of ``index``, and over the whole image."""
-        sat = F.pad(plane.cumsum(0).cumsum(1), (1, 0, 1, 0))
+        sat = F.pad(cumsum(plane, 0).cumsum(1), (1, 0, 1, 0))
         return sat[y1, x1] - sat[y0, x1] - sat[y1, x0] + sat[y0, x0], sat[-1, -1]
 
     n, n_all = window_sums(wt)

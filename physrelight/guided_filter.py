@@ -17,7 +17,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-__all__ = ["box_filter", "guided_filter", "guided_upsample"]
+__all__ = ["box_filter", "cumsum", "guided_filter", "guided_upsample"]
 
 
 def _check(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> None:
@@ -35,7 +35,7 @@ def _check(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> N
         raise ValueError(f"eps must be a positive number, got {eps!r}")
 
 
-def _cumsum(x: torch.Tensor, dim: int) -> torch.Tensor:
+def cumsum(x: torch.Tensor, dim: int) -> torch.Tensor:
     """``torch.cumsum(x, dim)``, the same numbers. Along a dimension other than the last, torch's CPU kernel strides
     through memory (four times slower than along rows on a 12-megapixel image), so the running sum is added one
     slice at a time instead, each slice contiguous, in float64 as torch accumulates float32 and float64."""
@@ -51,7 +51,7 @@ def _cumsum(x: torch.Tensor, dim: int) -> torch.Tensor:
 def _window_sums(x: torch.Tensor, radius: int, dim: int) -> torch.Tensor:
     """Sums of ``x`` over ``[i - r, i + r]`` along ``dim``, the window cut at the ends (cumulative sums: O(1) per pixel)."""
     n = x.shape[dim]
-    c = _cumsum(x, dim)  # c[k] = x[0] + ... + x[k]
+    c = cumsum(x, dim)  # c[k] = x[0] + ... + x[k]
     r = min(radius, n)
     # sum = c[min(i + r, n - 1)] - c[i - r - 1] (0 for i <= r), written in place into one output by slicing: no
     # padded copy of c and no concatenation (twice as fast on a 12-megapixel image as building both ends by cat)
