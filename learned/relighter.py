@@ -20,6 +20,7 @@ looking along world -Z (camera frame = world frame).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Callable
@@ -894,10 +895,19 @@ def sun_sky_map(sky: str = "clear", direction: Any = (0.0, 1.0, 0.0), height: in
 
     d = envmap.directions(height, 2 * height)
     if sky == "overcast":
-        up = np.array([[0.0, 1.0, 0.0]])
-        env = np.repeat(overcast_sky(d)[..., None], 3, axis=-1)
-        return env / float(sh.irradiance(sh.project_envmap(env, order=2), up)[0, 1])
+        return np.repeat(overcast_sky(d)[..., None], 3, axis=-1) * _overcast_level()
     return sunsky_radiance(d, _clear_sky_sun(direction))
+
+
+@functools.lru_cache(maxsize=1)
+def _overcast_level() -> float:
+    """The factor that gives the CIE overcast sky (:func:`physrelight.sky_model.overcast_sky`) order-2 irradiance 1
+    on a horizontal surface, as projected from its 64-row lat-long map."""
+    from physrelight import envmap
+    from physrelight.sky_model import overcast_sky
+
+    env = np.repeat(overcast_sky(envmap.directions(64, 128))[..., None], 3, axis=-1)
+    return 1.0 / float(sh.irradiance(sh.project_envmap(env, order=2), np.array([[0.0, 1.0, 0.0]]))[0, 1])
 
 
 def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
@@ -965,10 +975,14 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     """``(height, width, 3)`` the target's own sky as the photo's camera sees it (target units).
 
     An env map is looked up through the pinhole camera (``K``, ``world_to_camera``) by
-    :func:`physrelight.panorama.view` (one ray per pixel: a photo's pixel is finer than a map's
-    texel); a sun target is :func:`sun_sky_map`'s sky along each ray plus the sun's disc (radius
-    :data:`physrelight.sky_model.SUN_RADIUS_DEG`, luminance 1, the sun's colour). ``azimuth_deg`` turns the target about +Y as
-    :func:`rotate_azimuth` does (the camera is turned the other way).
+    :func:`physrelight.panorama.view`, one ray per pixel, bilinearly where a pixel covers a texel or more
+    and by the smooth cubic B-spline where the view magnifies the map
+    (:func:`physrelight.panorama.texel_magnification` above 1: a 640-px photo at 60 degrees sees a 1024-wide
+    map's texel over 3.4 pixels), so a bright texel is not drawn as a clipped square. A sun target's sky is
+    evaluated along each ray (:func:`physrelight.sky_model.sunsky_radiance`, or the CIE overcast sky at
+    :func:`sun_sky_map`'s level), smooth at any resolution, plus the sun's disc for a clear sky (radius
+    :data:`physrelight.sky_model.SUN_RADIUS_DEG`, luminance 1, the sun's colour). ``azimuth_deg`` turns the
+    target about +Y as :func:`rotate_azimuth` does (the camera is turned the other way).
 
     Raises:
         ValueError: an SH target (it has no sky to render).
@@ -981,10 +995,15 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     R = _turned_camera(world_to_camera, azimuth_deg)
     if kind == "env":
         env = envmap.read(target) if isinstance(target, (str, os.PathLike)) else np.asarray(target)
-        return torch.as_tensor(panorama.view(torch.as_tensor(env, dtype=torch.float32), K, R, height, width, 1))
+        smooth = panorama.texel_magnification(K, env.shape[1]) > 1.0
+        return torch.as_tensor(panorama.view(torch.as_tensor(env, dtype=torch.float32), K, R, height, width, 1,
+                                             interpolation="bspline" if smooth else "bilinear"))
     rays = horizon_clamped(panorama.camera_rays(K, R, height, width, 1))
     if sky == "overcast":
-        return panorama.look_up(torch.as_tensor(sun_sky_map(sky, target), dtype=torch.float32), rays)
+        from physrelight.sky_model import overcast_sky
+
+        d = rays[..., 0, :].double().numpy()
+        return torch.from_numpy(overcast_sky(d) * _overcast_level()).float()[..., None].expand(-1, -1, 3).contiguous()
     # the clear sky along each ray itself (not through a lat-long map): smooth at any resolution
     from physrelight.sky_model import sunsky_radiance
 

@@ -33,7 +33,8 @@ from physrelight import envmap
 from physrelight._checks import Array, check_finite, check_rotation, to_tensor
 from physrelight.camera import intrinsics_from_fov, look_at
 
-__all__ = ["MAX_FOV_DEG", "camera_rays", "level_camera", "look_up", "native_width", "view", "view_intrinsics", "view_mask"]
+__all__ = ["INTERPOLATIONS", "MAX_FOV_DEG", "camera_rays", "level_camera", "look_up", "native_width", "texel_magnification", "view",
+           "view_intrinsics", "view_mask"]
 
 MAX_FOV_DEG = 179.0
 """Widest horizontal field of view a pinhole view may have (180 deg is a plane at infinity)."""
@@ -134,8 +135,22 @@ def camera_rays(K: Array, world_to_camera: Array, height: int, width: int, sampl
     return world / torch.linalg.vector_norm(world, dim=-1, keepdim=True)
 
 
+INTERPOLATIONS = ("bilinear", "bspline")
+"""How :func:`look_up` reconstructs a map between texels: :func:`physrelight.envmap.sample` (bilinear, Mitsuba's) or
+:func:`physrelight.envmap.sample_bspline` (smooth, for views that magnify the map)."""
+
+
+def texel_magnification(K: Array, panorama_width: int) -> float:
+    """Pixels per texel at the centre of a view with intrinsics ``K (3, 3)`` of a ``panorama_width``-wide map: the
+    focal length (pixels per radian there) times a texel's width (``2 pi / W`` radians). Above 1 the view magnifies
+    the map (the centre's pixels are the largest of a pinhole view, so a view at most 1 here is at most 1
+    everywhere)."""
+    f = float(np.asarray(K, dtype=np.float64)[0, 0])
+    return f * 2.0 * math.pi / float(panorama_width)
+
+
 def view(env: Array, K: Array, world_to_camera: Array, height: int, width: int, samples: int = 4,
-         chunk_rays: int = 1 << 20) -> Array:
+         chunk_rays: int = 1 << 20, interpolation: str = "bilinear") -> Array:
     """The panorama as a pinhole camera at its centre sees it: linear radiance per pixel.
 
     Args:
@@ -145,6 +160,7 @@ def view(env: Array, K: Array, world_to_camera: Array, height: int, width: int, 
         samples: sub-pixel rays per axis (``samples**2`` per pixel). 4 and 8 agree within 1 %
             (relative l1) on the shipped panoramas at :func:`native_width`.
         chunk_rays: rays looked up at once (memory bound).
+        interpolation: one of :data:`INTERPOLATIONS` (:func:`look_up`).
 
     Returns:
         ``(height, width, 3)`` radiance, the type of ``env`` (float64 for numpy input).
@@ -152,23 +168,27 @@ def view(env: Array, K: Array, world_to_camera: Array, height: int, width: int, 
     e, restore = to_tensor(env, "env")
     envmap.check_envmap(e, "env")
     _check_size(height, width, samples)
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
     rows_per_chunk = max(1, chunk_rays // (width * samples * samples))
     out = []
     for r0 in range(0, height, rows_per_chunk):
         d = camera_rays(K, world_to_camera, height, width, samples, slice(r0, min(height, r0 + rows_per_chunk)))
-        out.append(look_up(e, d))
+        out.append(look_up(e, d, interpolation))
     return restore(torch.cat(out, dim=0))
 
 
-def look_up(env: torch.Tensor, rays: torch.Tensor) -> torch.Tensor:
+def look_up(env: torch.Tensor, rays: torch.Tensor, interpolation: str = "bilinear") -> torch.Tensor:
     """Box-filtered lookup: ``env (He, We, C)`` torch map, ``rays (h, w, S, 3)`` world directions
-    (:func:`camera_rays`) -> ``(h, w, C)``, the mean of the bilinear lookups of each pixel's ``S`` rays.
+    (:func:`camera_rays`) -> ``(h, w, C)``, the mean of the lookups of each pixel's ``S`` rays, bilinear
+    (:func:`physrelight.envmap.sample`) or cubic B-spline (:func:`physrelight.envmap.sample_bspline`).
 
     For several maps seen through one camera (a photo, its sky mask, targets), make the rays
-    once. ``C`` is 3 (a map) or 1 (a mask); no checks beyond :func:`physrelight.envmap.sample`'s."""
+    once. ``C`` is 3 (a map) or 1 (a mask); no checks beyond the samplers'."""
     if env.ndim == 3 and env.shape[-1] == 1:
-        return look_up(env.expand(-1, -1, 3).contiguous(), rays)[..., :1]
-    return envmap.sample(env, rays.to(env.dtype)).mean(dim=-2)
+        return look_up(env.expand(-1, -1, 3).contiguous(), rays, interpolation)[..., :1]
+    sampler = envmap.sample_bspline if interpolation == "bspline" else envmap.sample
+    return sampler(env, rays.to(env.dtype)).mean(dim=-2)
 
 
 def view_mask(mask: Array, K: Array, world_to_camera: Array, height: int, width: int, samples: int = 4) -> Array:

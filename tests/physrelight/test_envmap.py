@@ -234,3 +234,51 @@ def test_14_angles_name_the_texels_of_the_maps_layout() -> None:
     assert envmap.direction_from_angles(np.zeros((2, 1)), np.zeros(3)).shape == (2, 3, 3)
     with pytest.raises(ValueError, match="finite"):
         envmap.direction_from_angles(float("nan"), 0.0)
+
+
+def _dirs_at(x: torch.Tensor, y: torch.Tensor, h: int, w: int) -> torch.Tensor:
+    """World directions whose lookup coordinates (texel-centred column ``x``, align-corners row ``y``) are given."""
+    u = (x + 0.5) / w
+    theta = y / (h - 1) * math.pi
+    phi = u * 2 * math.pi  # u = atan2(dx, -dz) / (2 pi)
+    return torch.stack([torch.sin(theta) * torch.sin(phi), torch.cos(theta), -torch.sin(theta) * torch.cos(phi)], -1)
+
+
+def test_15_the_bspline_lookup_keeps_constants_and_linear_maps_exactly() -> None:
+    """The cubic B-spline's weights sum to 1 and reproduce linear functions: a constant map comes back constant and
+    a map linear in the texel coordinates comes back as that linear function of the lookup's coordinates (so
+    equal to the bilinear lookup), away from the wrap seam and the clamped pole rows."""
+    h, w = 16, 32
+    g = torch.Generator().manual_seed(0)
+    x = torch.empty(500, dtype=torch.float64).uniform_(3.0, w - 5.0, generator=g)
+    y = torch.empty(500, dtype=torch.float64).uniform_(2.0, h - 4.0, generator=g)
+    d = _dirs_at(x, y, h, w)
+    const = torch.full((h, w, 3), 0.37, dtype=torch.float64)
+    assert torch.allclose(envmap.sample_bspline(const, d), const[0, 0].expand(500, 3), atol=1e-12)
+    rows, cols = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij")
+    lin = torch.stack([1.0 + 0.5 * cols, 5.0 - 0.25 * rows, 0.1 * cols + 0.3 * rows], -1)
+    expected = torch.stack([1.0 + 0.5 * x, 5.0 - 0.25 * y, 0.1 * x + 0.3 * y], -1)
+    assert torch.allclose(envmap.sample_bspline(lin, d), expected, atol=1e-9)
+    assert torch.allclose(envmap.sample(lin, d), expected, atol=1e-9)
+
+
+def test_16_the_bspline_lookup_of_a_bright_texel_is_positive_and_keeps_the_rows_mean() -> None:
+    """A lone bright texel: the B-spline lookup is never negative (bicubic interpolation rings below 0 round it) and
+    is 4/9 of the texel at its centre ((2/3)^2, the spline's centre weight per axis). Looked up all round a row
+    (equally spaced, whole turns), it averages to 1/6, 4/6, 1/6 of the means of the rows above, at and below."""
+    h, w = 16, 32
+    env = torch.zeros(h, w, 3, dtype=torch.float64)
+    env[7, 11] = 90.0
+    g = torch.Generator().manual_seed(1)
+    x = torch.empty(4000, dtype=torch.float64).uniform_(0.0, w, generator=g)
+    y = torch.empty(4000, dtype=torch.float64).uniform_(1.0, h - 2.0, generator=g)
+    assert float(envmap.sample_bspline(env, _dirs_at(x, y, h, w)).min()) >= 0.0
+    centre = envmap.sample_bspline(env, _dirs_at(torch.tensor([11.0]), torch.tensor([7.0]), h, w))
+    assert torch.allclose(centre, torch.full((1, 3), 90.0 * 4 / 9, dtype=torch.float64), atol=1e-9)
+    noise = torch.rand(h, w, 3, generator=g, dtype=torch.float64)
+    k = 7  # samples per texel
+    xs = torch.arange(w * k, dtype=torch.float64) / k
+    for r in (3, 8):
+        mean = envmap.sample_bspline(noise, _dirs_at(xs, torch.full_like(xs, float(r)), h, w)).mean(0)
+        expected = (noise[r - 1].mean(0) + 4 * noise[r].mean(0) + noise[r + 1].mean(0)) / 6
+        assert torch.allclose(mean, expected, atol=1e-9)
