@@ -23,6 +23,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -205,6 +206,34 @@ def irradiance_reference(env: Array, normals: Array, chunk_texels: int = 1 << 22
 # ---------------------------------------------------------------- resampling
 
 
+def _lookup_coordinates(env: Array, dirs: Array) -> tuple[torch.Tensor, torch.Tensor, Callable, torch.Tensor,
+                                                          torch.Tensor]:
+    """What both lookups share: the checked map ``e (H, W, 3)``, the unit directions ``d (..., 3)`` in its dtype,
+    the function that gives results back in the type of ``dirs``, and each direction's continuous texel
+    coordinates: texel-centred columns ``x`` (wrapping) and align-corners rows ``y``."""
+    e, _ = to_tensor(env, "env")
+    d, restore = to_tensor(dirs, "dirs")
+    check_envmap(e, "env")
+    check_last_dim(d, 3, "dirs", "(..., 3)")
+    check_finite(d, "dirs")
+    d = d.to(e.dtype)
+    d = d / torch.linalg.vector_norm(d, dim=-1, keepdim=True).clamp_min(1e-12)
+    h, w = e.shape[0], e.shape[1]
+    u = torch.atan2(d[..., 0], -d[..., 2]) / (2 * math.pi)
+    u = u - torch.floor(u)
+    v = torch.acos(d[..., 1].clamp(-1.0, 1.0)) / math.pi
+    return e, d, restore, u * w - 0.5, v * (h - 1)
+
+
+def _at_poles(out: torch.Tensor, d: torch.Tensor, north: torch.Tensor, south: torch.Tensor) -> torch.Tensor:
+    """``out`` with the directions exactly at a pole given ``north`` or ``south``: there the column (atan2 of two
+    zeros) is undefined, and the pole is one point, so a lookup uses the pole rows' means, not an arbitrary texel."""
+    at_pole = d[..., 1].abs() >= 1.0 - 1e-12
+    if bool(at_pole.any()):
+        out = torch.where(at_pole[..., None], torch.where(d[..., 1:2] > 0, north, south), out)
+    return out
+
+
 def sample(env: Array, dirs: Array) -> Array:
     """Bilinear lookup of a lat-long map in world directions, as Mitsuba's ``envmap`` does.
 
@@ -218,19 +247,8 @@ def sample(env: Array, dirs: Array) -> Array:
     Returns:
         ``(..., 3)`` radiance.
     """
-    e, _ = to_tensor(env, "env")
-    d, restore = to_tensor(dirs, "dirs")
-    check_envmap(e, "env")
-    check_last_dim(d, 3, "dirs", "(..., 3)")
-    check_finite(d, "dirs")
-    d = d.to(e.dtype)
-    d = d / torch.linalg.vector_norm(d, dim=-1, keepdim=True).clamp_min(1e-12)
+    e, d, restore, x, y = _lookup_coordinates(env, dirs)
     h, w = e.shape[0], e.shape[1]
-    u = torch.atan2(d[..., 0], -d[..., 2]) / (2 * math.pi)
-    u = u - torch.floor(u)
-    v = torch.acos(d[..., 1].clamp(-1.0, 1.0)) / math.pi
-    x = u * w - 0.5  # texel-centred columns
-    y = v * (h - 1)  # align-corners rows
     x0 = torch.floor(x)
     y0 = torch.floor(y).clamp(0, h - 2)
     fx, fy = (x - x0)[..., None], (y - y0)[..., None]
@@ -241,14 +259,7 @@ def sample(env: Array, dirs: Array) -> Array:
     top = e[y0, x0] * (1 - fx) + e[y0, x1] * fx
     bot = e[y1, x0] * (1 - fx) + e[y1, x1] * fx
     out = top * (1 - fy) + bot * fy
-    # Exactly at a pole the column (atan2 of two zeros) is undefined: the pole is one
-    # point, so use the mean of its row rather than an arbitrary texel.
-    at_pole = d[..., 1].abs() >= 1.0 - 1e-12
-    if bool(at_pole.any()):
-        north = e[0].mean(dim=0)
-        south = e[-1].mean(dim=0)
-        out = torch.where(at_pole[..., None], torch.where(d[..., 1:2] > 0, north, south), out)
-    return restore(out)
+    return restore(_at_poles(out, d, e[0].mean(dim=0), e[-1].mean(dim=0)))
 
 
 def sample_bspline(env: Array, dirs: Array) -> Array:
@@ -259,30 +270,19 @@ def sample_bspline(env: Array, dirs: Array) -> Array:
     every texel, and an HDR map's bright texels, clipped on display, become squares. The uniform cubic B-spline
     is smooth (C2), never negative (no dark rings round a bright texel, unlike bicubic interpolation) and sums
     its weights to 1, so a constant or a linear function of the texel coordinates comes back exactly and the
-    map's mean is kept; it approximates rather than interpolates (a lone bright texel is spread to 2/3 at its
+    map's mean is kept; it approximates rather than interpolates (a lone bright texel is spread to 4/9 at its
     centre). Same coordinates as :func:`sample` (texel-centred columns, wrapping; align-corners rows, clamped at
-    the poles).
+    the poles, where the pole rows' means stand in for the columns').
 
     Args:
-        env: ``(H, W, C)`` map.
+        env: ``(H, W, 3)`` map.
         dirs: ``(..., 3)`` directions (normalised here).
 
     Returns:
-        ``(..., C)`` radiance.
+        ``(..., 3)`` radiance.
     """
-    e, _ = to_tensor(env, "env")
-    d, restore = to_tensor(dirs, "dirs")
-    check_envmap(e, "env")
-    check_last_dim(d, 3, "dirs", "(..., 3)")
-    check_finite(d, "dirs")
-    d = d.to(e.dtype)
-    d = d / torch.linalg.vector_norm(d, dim=-1, keepdim=True).clamp_min(1e-12)
+    e, d, restore, x, y = _lookup_coordinates(env, dirs)
     h, w = e.shape[0], e.shape[1]
-    u = torch.atan2(d[..., 0], -d[..., 2]) / (2 * math.pi)
-    u = u - torch.floor(u)
-    v = torch.acos(d[..., 1].clamp(-1.0, 1.0)) / math.pi
-    x = u * w - 0.5
-    y = v * (h - 1)
     x0, y0 = torch.floor(x), torch.floor(y)
     wx, wy = _bspline_weights(x - x0), _bspline_weights(y - y0)
     x0, y0 = x0.long(), y0.long()
@@ -293,7 +293,11 @@ def sample_bspline(env: Array, dirs: Array) -> Array:
         for b in range(4):
             col = (x0 + (b - 1)) % w
             out += (wy[a] * wx[b])[..., None] * flat[row + col]
-    return restore(out)
+    # at a pole (y = 0 or H - 1, the weights 1/6, 4/6, 1/6 with the outer row clamped to the pole's)
+    means = e.mean(dim=1)
+    north = (5 * means[0] + means[1]) / 6
+    south = (5 * means[-1] + means[-2]) / 6
+    return restore(_at_poles(out, d, north, south))
 
 
 def _bspline_weights(t: torch.Tensor) -> list[torch.Tensor]:

@@ -282,3 +282,16 @@ def test_16_the_bspline_lookup_of_a_bright_texel_is_positive_and_keeps_the_rows_
         mean = envmap.sample_bspline(noise, _dirs_at(xs, torch.full_like(xs, float(r)), h, w)).mean(0)
         expected = (noise[r - 1].mean(0) + 4 * noise[r].mean(0) + noise[r + 1].mean(0)) / 6
         assert torch.allclose(mean, expected, atol=1e-9)
+
+
+def test_17_both_lookups_give_a_pole_its_rows_mean() -> None:
+    """Exactly at a pole the column is undefined: the bilinear lookup gives the pole row's mean, the B-spline its
+    weights' rows (5/6 of the pole row's mean and 1/6 of the next row's), whatever the map's columns hold. Off the
+    pole both depend on the column, which is why a real map's pole row is (nearly) one colour."""
+    g = torch.Generator().manual_seed(2)
+    env = torch.rand(8, 16, 3, generator=g, dtype=torch.float64)
+    up, down = torch.tensor([[0.0, 1.0, 0.0]], dtype=torch.float64), torch.tensor([[0.0, -1.0, 0.0]], dtype=torch.float64)
+    assert torch.allclose(envmap.sample(env, up)[0], env[0].mean(0))
+    assert torch.allclose(envmap.sample(env, down)[0], env[-1].mean(0))
+    assert torch.allclose(envmap.sample_bspline(env, up)[0], (5 * env[0].mean(0) + env[1].mean(0)) / 6)
+    assert torch.allclose(envmap.sample_bspline(env, down)[0], (5 * env[-1].mean(0) + env[-2].mean(0)) / 6)
