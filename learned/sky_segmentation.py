@@ -415,8 +415,8 @@ def plausible_sky(mask: torch.Tensor, image: torch.Tensor,
     when it touches the top border, or when it is as bright as the top-touching sky (median
     luminance at least half of it) and as blue (blue/red at least 0.9 of it): sky between towers
     or branches. The kept sky is then judged a sky when it covers at least 1 % of the photo, is
-    sky-coloured (median blue/red >= :data:`COLOUR_MIN_BLUE_OVER_RED`: blue, grey or white, not a warm wall, a face or a
-    cup) and smooth (median 3 x 3 roughness of log luminance, less the photo's noise, at most half the
+    sky-coloured (median blue/red >= :data:`COLOUR_MIN_BLUE_OVER_RED`: blue, grey or white, not a warm
+    wall, a face or a cup) and smooth (median 3 x 3 roughness of log luminance, less the photo's noise, at most half the
     foreground's: :func:`sky_roughness`; ``noise_var (H, W)``, the squared roughness the photo's noise alone
     gives at each pixel, when the caller knows it better than ``image`` shows, as for a resized photo).
 

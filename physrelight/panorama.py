@@ -33,8 +33,8 @@ from physrelight import envmap
 from physrelight._checks import Array, check_finite, check_rotation, to_tensor
 from physrelight.camera import intrinsics_from_fov, look_at
 
-__all__ = ["INTERPOLATIONS", "MAX_FOV_DEG", "camera_rays", "level_camera", "look_up", "native_width", "texel_magnification", "view",
-           "view_intrinsics", "view_mask"]
+__all__ = ["INTERPOLATIONS", "MAX_FOV_DEG", "camera_rays", "level_camera", "look_up", "native_width",
+           "texel_magnification", "view", "view_intrinsics", "view_mask"]
 
 MAX_FOV_DEG = 179.0
 """Widest horizontal field of view a pinhole view may have (180 deg is a plane at infinity)."""

@@ -282,7 +282,8 @@ def test_06c_the_smoothness_tests_roughness_takes_the_noise_out(display) -> None
     lum = colour.from_ldr(d)
     s = log_noise_sigma(lum)
     y = float(colour.from_ldr(torch.tensor(display)))
-    dlog_ddisplay = 2 * math.log(1.001) / float(colour.to_ldr(torch.tensor(y * 1.001)) - colour.to_ldr(torch.tensor(y / 1.001)))
+    step = colour.to_ldr(torch.tensor(y * 1.001)) - colour.to_ldr(torch.tensor(y / 1.001))
+    dlog_ddisplay = 2 * math.log(1.001) / float(step)
     sigma_log = 0.02 * dlog_ddisplay  # the display noise in log luminance at this brightness
     assert abs(float(s.median()) / sigma_log - 1.0) < 0.15
     r2 = _roughness(lum)[1:-1, 1:-1] ** 2  # interior windows: 9 pixels each
