@@ -142,9 +142,9 @@ INTERPOLATIONS = ("bilinear", "bspline")
 
 def texel_magnification(K: Array, panorama_width: int) -> float:
     """Pixels per texel at the centre of a view with intrinsics ``K (3, 3)`` of a ``panorama_width``-wide map: the
-    focal length (pixels per radian there) times a texel's width (``2 pi / W`` radians). Above 1 the view magnifies
-    the map (the centre's pixels are the largest of a pinhole view, so a view at most 1 here is at most 1
-    everywhere)."""
+    focal length (pixels per radian there) times a texel's width at the equator (``2 pi / W`` radians). Above 1 the
+    view magnifies the map. It is a typical value, not a bound: off the axis a pinhole's pixels subtend less (more
+    pixels per texel), towards the poles a texel narrows (fewer). A view at :func:`native_width` is under 1 here."""
     f = float(np.asarray(K, dtype=np.float64)[0, 0])
     return f * 2.0 * math.pi / float(panorama_width)
 
@@ -168,8 +168,6 @@ def view(env: Array, K: Array, world_to_camera: Array, height: int, width: int, 
     e, restore = to_tensor(env, "env")
     envmap.check_envmap(e, "env")
     _check_size(height, width, samples)
-    if interpolation not in INTERPOLATIONS:
-        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
     rows_per_chunk = max(1, chunk_rays // (width * samples * samples))
     out = []
     for r0 in range(0, height, rows_per_chunk):
@@ -185,6 +183,8 @@ def look_up(env: torch.Tensor, rays: torch.Tensor, interpolation: str = "bilinea
 
     For several maps seen through one camera (a photo, its sky mask, targets), make the rays
     once. ``C`` is 3 (a map) or 1 (a mask); no checks beyond the samplers'."""
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
     if env.ndim == 3 and env.shape[-1] == 1:
         return look_up(env.expand(-1, -1, 3).contiguous(), rays, interpolation)[..., :1]
     sampler = envmap.sample_bspline if interpolation == "bspline" else envmap.sample

@@ -118,3 +118,5 @@ def test_07_views_reject_bad_cameras_and_maps() -> None:
         panorama.view(bad, *_cam(60.0, 0.0, 0.0)[:2], 4, 4)
     with pytest.raises(ValueError, match=r"world_to_camera"):
         panorama.view(env, panorama.view_intrinsics(60.0, 4, 3), 2 * np.eye(3), 3, 4)
+    with pytest.raises(ValueError, match=r"interpolation must be one of"):
+        panorama.view(env, *_cam(60.0, 0.0, 0.0)[:2], 4, 4, interpolation="bicubic")
