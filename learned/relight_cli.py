@@ -8,6 +8,10 @@ Examples::
     physrelight relight photo.jpg --sun 25 120 --sequence 24 -o day.gif
     physrelight relight photo.jpg --sh lighting.npy -o relit.png
     physrelight relight photo.jpg --source-env on_set.exr --env target.exr -o relit.png
+    physrelight relight photo.jpg --env target.exr --exposure keep -o relit.exr
+
+``-o NAME.exr`` writes the relit photo as linear radiance (float32): the photo's sRGB-decoded units times the
+exposure's gain, nothing clipped.
 
 The target lighting is given in the world frame (Y up); the camera is level and looks along
 world -Z: ``--azimuth`` turns the target about the vertical axis, ``--sun ELEV AZIM`` puts the
@@ -180,9 +184,11 @@ def _relight(args: argparse.Namespace) -> int:
 
     torch.set_num_threads(args.threads)
     out = Path(args.output)
-    want = ".gif" if args.sequence else ".png"
-    if out.suffix.lower() != want:
-        raise ValueError(f"output must be a {want} file{' with --sequence' if args.sequence else ''}, got {str(out)!r}")
+    if args.sequence and out.suffix.lower() != ".gif":
+        raise ValueError(f"output must be a .gif file with --sequence, got {str(out)!r}")
+    if not args.sequence and out.suffix.lower() not in (".png", ".exr"):
+        raise ValueError(f"output must be a .png (display) or .exr (linear radiance) file, got {str(out)!r}")
+    linear = out.suffix.lower() == ".exr"
     if args.sky is not None and args.sun is None:
         raise ValueError("--sky chooses the sky of a --sun target; an --env or --sh target brings its own")
     if args.sun is not None and (args.sky or "clear") == "clear" and not args.sun[0] > 0:
@@ -234,14 +240,20 @@ def _relight(args: argparse.Namespace) -> int:
             frames = relighter.relight_sequence(image, target, azimuths, progress=not args.quiet, **common)
         else:
             with _stage_bar(relighter, enabled=not args.quiet and image.shape[0] * image.shape[1] >= PROGRESS_PIXELS):
-                layers = relighter.relight_layers(image, target, azimuth_deg=args.azimuth, **common)
+                layers = relighter.relight_layers(image, target, azimuth_deg=args.azimuth, linear=linear, **common)
     for w in {str(w.message) for w in caught if issubclass(w.category, UserWarning) and "NumPy array" not in str(w.message)}:
         print(f"physrelight: warning: {w}", file=sys.stderr)
     if args.sequence:
         _write_gif(out, frames, args.fps)
         print(f"{len(frames)} frames -> {out}")
         return 0
-    io.write_png(out, layers["relit"])
+    if linear:  # the relit radiance as it is, and its display values for the layers
+        from physrelight import colour, envmap
+
+        envmap.write(out, layers["relit"])
+        layers["relit"] = colour.to_ldr(layers["relit"])
+    else:
+        io.write_png(out, layers["relit"])
     if args.layers is not None:
         d = Path(args.layers)
         d.mkdir(exist_ok=True)
@@ -314,5 +326,5 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=positive_int, default=2, help="torch CPU threads (default: 2)")
     p.add_argument("--quiet", action="store_true",
                    help="no progress bar (shown for --sequence and for photos of a megapixel or more)")
-    p.add_argument("-o", "--output", required=True, help="output .png (or .gif with --sequence)")
+    p.add_argument("-o", "--output", required=True, help="output .png, .exr (linear radiance, float32) or .gif with --sequence")
     p.set_defaults(handler=_relight)

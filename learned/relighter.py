@@ -561,18 +561,20 @@ class Relighter:
     def relight(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
                 method: str = DEFAULT_METHOD, azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
                 seed: int = 0, sky_source: str | None = None, exposure: str | float = "keep",
-                fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None, source: Any = None) -> Any:
+                fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None, source: Any = None,
+                linear: bool = False) -> Any:
         """Relight a photo of any size to a target lighting; the relit photo only.
 
         See :meth:`relight_layers` for the arguments; returns display values in [0, 1]
-        (sRGB), type and layout of ``image`` (a batch is relit photo by photo).
+        (sRGB), type and layout of ``image`` (a batch is relit photo by photo), or with ``linear`` the
+        relit linear radiance before the display curve (see :meth:`relight_layers`).
         """
         lin, kind = _as_image(image)
         frames = [self._relight_tensors(lin[b: b + 1], target, world_to_camera, sky_mask if lin.shape[0] == 1 else
                                         (None if sky_mask is None else _as_mask(sky_mask, lin)[b: b + 1]),
                                         method, azimuth_deg, sky, new_sky, seed, layers=False, sky_source=sky_source,
                                         exposure=exposure, fov_deg=fov_deg, pitch_deg=pitch_deg,
-                                        source=source)["relit"]
+                                        source=source, linear=linear)["relit"]
                   for b in range(lin.shape[0])]
         return _give_back(torch.cat(frames), kind)
 
@@ -602,7 +604,7 @@ class Relighter:
                        method: str = DEFAULT_METHOD, azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
                        seed: int = 0, sky_source: str | None = None, exposure: str | float = "keep",
                        fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None,
-                       source: Any = None) -> dict[str, np.ndarray]:
+                       source: Any = None, linear: bool = False) -> dict[str, np.ndarray]:
         """Relight a photo of any size and give every layer at full resolution.
 
         The networks run at their training resolution (the short side resized to ``res``);
@@ -645,6 +647,10 @@ class Relighter:
                 target's units), when known (a map captured on set): the *known-source* track of
                 :meth:`relight_linear` (quotient methods divide by it; relighting to it gives the
                 photo back). None: the decomposition's estimate.
+            linear: give ``relit`` as linear radiance instead of display values: the photo's linearised
+                units (sRGB decoded) times the exposure's gain, its sky in the same units, not clipped
+                (``colour.to_ldr`` of it is the display ``relit``). For measuring against a renderer; the
+                other layers stay display values.
 
         Returns:
             numpy ``(H, W, C)`` display values in [0, 1]: ``relit``, ``albedo``, ``normals``
@@ -656,7 +662,7 @@ class Relighter:
             raise ValueError(f"relight_layers takes one image, got a batch of {lin.shape[0]}")
         layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky, new_sky,
                                        seed, sky_source=sky_source, exposure=exposure, fov_deg=fov_deg,
-                                       pitch_deg=pitch_deg, source=source)
+                                       pitch_deg=pitch_deg, source=source, linear=linear)
         return {k: v[0].permute(1, 2, 0).numpy() for k, v in layers.items()}
 
     def _stage(self, name: str) -> None:
@@ -678,9 +684,10 @@ class Relighter:
                          azimuth_deg: float, sky_type: str, new_sky: bool = True, seed: int = 0,
                          layers: bool = True, reuse: dict[str, Any] | None = None, sky_source: str | None = None,
                          exposure: str | float = "keep", fov_deg: float = DEFAULT_FOV_DEG,
-                         pitch_deg: float | None = None, source: Any = None) -> dict[str, torch.Tensor]:
-        """The relit photo (``"relit"``) and, with ``layers``, every layer at full resolution, of one
-        photo ``lin (1, 3, H, W)``.
+                         pitch_deg: float | None = None, source: Any = None,
+                         linear: bool = False) -> dict[str, torch.Tensor]:
+        """The relit photo (``"relit"``: display values, or with ``linear`` the linear radiance) and, with
+        ``layers``, every layer at full resolution, of one photo ``lin (1, 3, H, W)``.
 
         ``reuse``, a dict this method fills on its first call for a photo and reads on later
         ones: the sky mask, the camera, the denoised photo and the working-resolution decomposition,
@@ -783,7 +790,7 @@ class Relighter:
         relit = relit * exposure_gain(exposure, relit, lin, ~sky, highlights=sky)[:, None, None, None]
 
         with torch.no_grad():
-            result = {"relit": colour.to_ldr(relit.clamp_min(0))}
+            result = {"relit": relit.clamp_min(0) if linear else colour.to_ldr(relit.clamp_min(0))}
             if not layers:  # relight() and sequences need only the photo: skip the full-size layers
                 return result
             self._stage("layers")

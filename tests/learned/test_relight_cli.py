@@ -179,3 +179,49 @@ def test_06_a_large_photo_shows_its_stages_and_quiet_shows_nothing(photo: Path, 
     assert main(base + ["-o", str(tmp_path / "quiet.png"), "--quiet"]) == 0
     assert capsys.readouterr().err == ""
     assert np.array_equal(io.read_image(tmp_path / "big.png"), io.read_image(tmp_path / "small.png"))
+
+
+def test_07_an_exr_output_is_the_relit_linear_radiance(photo: Path, tmp_path: Path, capsys) -> None:
+    """``-o relit.exr`` writes the relit radiance before the display curve: its display values are the PNG's (to
+    8-bit rounding), and relit to its own lighting on the known track (the quotient, the sky kept, the camera's
+    exposure) it is the photo's own linear radiance, exactly. Any other suffix is refused in one line."""
+    import torch
+
+    from physrelight import colour
+
+    exr, png = tmp_path / "relit.exr", tmp_path / "relit.png"
+    for out in (exr, png):
+        assert main(["relight", str(photo), "--env", str(FOREST), "--exposure", "keep", "--quiet", "--threads", "1",
+                     "-o", str(out)]) == 0
+    linear = envmap.read(exr)
+    assert linear.shape == (52, 76, 3) and linear.dtype == np.float32
+    shown = colour.to_ldr(torch.from_numpy(linear)).numpy()
+    assert np.abs(shown - io.read_image(png)).max() <= 0.5 / 255 + 1e-6
+    assert float(linear.max()) > 0.0
+    same = tmp_path / "same.exr"
+    assert main(["relight", str(photo), "--env", str(FOREST), "--source-env", str(FOREST), "--method", "quotient",
+                 "--keep-sky", "--exposure", "keep", "--quiet", "--threads", "1", "-o", str(same)]) == 0
+    photo_linear = colour.from_ldr(torch.from_numpy(io.read_image(photo))).numpy()
+    np.testing.assert_allclose(envmap.read(same), photo_linear, rtol=1e-5, atol=1e-7)
+    capsys.readouterr()
+    assert main(["relight", str(photo), "--env", str(FOREST), "-o", str(tmp_path / "relit.jpg")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and ".png (display) or .exr (linear radiance)" in err
+    assert not (tmp_path / "relit.jpg").exists()
+
+
+def test_07b_the_apis_linear_relit_photo_is_the_display_one_before_its_curve(photo: Path) -> None:
+    """``Relighter.relight(..., linear=True)`` is the display result before :func:`physrelight.colour.to_ldr`,
+    exactly, with the automatic exposure too."""
+    import torch
+
+    from learned import Relighter
+    from physrelight import colour
+
+    relighter = Relighter.load()
+    image = io.read_image(photo)
+    for exposure in ("keep", "auto"):
+        shown = relighter.relight(image, str(FOREST), exposure=exposure)
+        linear = relighter.relight(image, str(FOREST), exposure=exposure, linear=True)
+        assert float(linear.min()) >= 0.0
+        np.testing.assert_array_equal(colour.to_ldr(torch.from_numpy(linear)).numpy(), shown)
