@@ -11,7 +11,9 @@ Examples::
     physrelight relight photo.jpg --env target.exr --exposure keep -o relit.exr
 
 ``-o NAME.exr`` writes the relit photo as linear radiance (float32): the photo's sRGB-decoded units times the
-exposure's gain, nothing clipped.
+exposure's gain, nothing clipped. A photo given as ``.exr`` or ``.hdr`` (a render, an HDR photo) is read as linear
+radiance and relit at a display-like level (its 99.9th-percentile luminance to 1); an ``.exr`` output is given
+back in its own units.
 
 The target lighting is given in the world frame (Y up); the camera is level and looks along
 world -Z: ``--azimuth`` turns the target about the vertical axis, ``--sun ELEV AZIM`` puts the
@@ -232,7 +234,8 @@ def _relight(args: argparse.Namespace) -> int:
         relighter.denoise = DENOISE
     common = dict(sky_mask=mask, method=args.method, sky=args.sky or "clear", new_sky=not args.keep_sky,
                   seed=args.seed, sky_source=args.sky_source, exposure=exposure,
-                  fov_deg=fov if fov is not None else DEFAULT_FOV_DEG, pitch_deg=args.pitch, source=source)
+                  fov_deg=fov if fov is not None else DEFAULT_FOV_DEG, pitch_deg=args.pitch, source=source,
+                  radiance=photo.radiance)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
         if args.sequence:
@@ -282,7 +285,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("relight", help="relight one outdoor photo to a new lighting (shipped weights)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("photo", help="RGB photo (PNG or JPEG)")
+    p.add_argument("photo", help="RGB photo (PNG or JPEG), or linear radiance (.exr or .hdr)")
     tgt = p.add_mutually_exclusive_group(required=True)
     tgt.add_argument("--env", help="target environment map (lat-long .exr or .hdr, world frame, Y up)")
     tgt.add_argument("--sh", help="target order-2 radiance SH, world frame: .npy, .json or text, shape (9, 3)")

@@ -89,6 +89,44 @@ def _as_image(image: Any) -> tuple[torch.Tensor, str]:
     return lin, kind
 
 
+RADIANCE_WHITE_QUANTILE = 0.999
+"""A radiance photo (``radiance=True``) is brought to a display-like range first: its luminance at this quantile
+to 1, as a camera exposed not to clip more than a thousandth of the frame (unchanged when that is already at or
+below 1). The networks, the sky mask's tests and the display curve all expect a photo's range."""
+
+
+def _as_radiance(image: Any) -> tuple[torch.Tensor, str, float]:
+    """A linear radiance photo -> ``(B, 3, H, W)`` float32 in a display-like range, how to give results back, and
+    the gain that brought it there (:data:`RADIANCE_WHITE_QUANTILE`; the photo's units are ``result / gain``)."""
+    from physrelight.stats import quantile
+
+    if isinstance(image, np.ndarray):
+        if image.ndim != 3 or image.shape[-1] != 3:
+            raise ValueError(f"a numpy image must have shape (H, W, 3), got {image.shape}")
+        if not np.issubdtype(image.dtype, np.floating):
+            raise ValueError(f"a radiance photo must hold floats, got dtype {image.dtype}")
+        t, kind = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None], "numpy"
+    elif isinstance(image, torch.Tensor) and image.ndim in (3, 4) and image.shape[-3] == 3:
+        if not image.is_floating_point():
+            raise ValueError(f"a radiance photo must hold floats, got dtype {image.dtype}")
+        t, kind = (image[None], "chw") if image.ndim == 3 else (image, "bchw")
+    else:
+        raise ValueError("a radiance photo must be a numpy (H, W, 3) or torch (3, H, W) / (B, 3, H, W) float array")
+    if t.shape[-1] < 8 or t.shape[-2] < 8:
+        raise ValueError(f"image must be at least 8x8 pixels, got {tuple(t.shape[-2:])}")
+    t = t.detach().float().cpu()
+    if not bool(torch.isfinite(t).all()):
+        raise ValueError("a radiance photo must be finite (it holds NaN or inf)")
+    if bool((t < 0).any()):
+        raise ValueError(f"a radiance photo must be non-negative, min {float(t.min()):.4g}")
+    lum = (t * t.new_tensor(colour.LUMINANCE)[None, :, None, None]).sum(1)
+    white = float(quantile(lum, RADIANCE_WHITE_QUANTILE))
+    if white <= 0.0:
+        raise ValueError("a radiance photo must not be black")
+    gain = 1.0 / white if white > 1.0 else 1.0
+    return t * gain, kind, gain
+
+
 def _give_back(x: torch.Tensor, kind: str) -> Any:
     if kind == "numpy":
         return x[0].permute(1, 2, 0).numpy()
@@ -562,33 +600,33 @@ class Relighter:
                 method: str = DEFAULT_METHOD, azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
                 seed: int = 0, sky_source: str | None = None, exposure: str | float = "keep",
                 fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None, source: Any = None,
-                linear: bool = False) -> Any:
+                linear: bool = False, radiance: bool = False) -> Any:
         """Relight a photo of any size to a target lighting; the relit photo only.
 
         See :meth:`relight_layers` for the arguments; returns display values in [0, 1]
         (sRGB), type and layout of ``image`` (a batch is relit photo by photo), or with ``linear`` the
         relit linear radiance before the display curve (see :meth:`relight_layers`).
         """
-        lin, kind = _as_image(image)
+        lin, kind, gain = _as_radiance(image) if radiance else (*_as_image(image), 1.0)
         frames = [self._relight_tensors(lin[b: b + 1], target, world_to_camera, sky_mask if lin.shape[0] == 1 else
                                         (None if sky_mask is None else _as_mask(sky_mask, lin)[b: b + 1]),
                                         method, azimuth_deg, sky, new_sky, seed, layers=False, sky_source=sky_source,
                                         exposure=exposure, fov_deg=fov_deg, pitch_deg=pitch_deg,
                                         source=source, linear=linear)["relit"]
                   for b in range(lin.shape[0])]
-        return _give_back(torch.cat(frames), kind)
+        return _give_back(torch.cat(frames) / gain if linear else torch.cat(frames), kind)
 
     def relight_sequence(self, image: Any, target: Any, azimuths_deg: Any, world_to_camera: Any = None,
                          sky_mask: Any = None, method: str = DEFAULT_METHOD, sky: str = "clear", new_sky: bool = True,
                          seed: int = 0, progress: bool = False, sky_source: str | None = None,
                          exposure: str | float = "keep", fov_deg: float = DEFAULT_FOV_DEG,
-                         pitch_deg: float | None = None, source: Any = None) -> list[Any]:
+                         pitch_deg: float | None = None, source: Any = None, radiance: bool = False) -> list[Any]:
         """:meth:`relight` for each azimuth of ``azimuths_deg`` (degrees, e.g. a turning sun), the photo
-        segmented and decomposed once: the same frames as separate :meth:`relight` calls, cheaper.
-        ``progress`` shows a progress bar."""
+        segmented and decomposed once: the same frames as separate :meth:`relight` calls, cheaper (display
+        values; ``radiance`` as for :meth:`relight_layers`). ``progress`` shows a progress bar."""
         from tqdm import tqdm
 
-        lin, kind = _as_image(image)
+        lin, kind = _as_radiance(image)[:2] if radiance else _as_image(image)
         if lin.shape[0] != 1:
             raise ValueError(f"relight_sequence takes one image, got a batch of {lin.shape[0]}")
         reuse: dict[str, Any] = {}
@@ -604,7 +642,7 @@ class Relighter:
                        method: str = DEFAULT_METHOD, azimuth_deg: float = 0.0, sky: str = "clear", new_sky: bool = True,
                        seed: int = 0, sky_source: str | None = None, exposure: str | float = "keep",
                        fov_deg: float = DEFAULT_FOV_DEG, pitch_deg: float | None = None,
-                       source: Any = None, linear: bool = False) -> dict[str, np.ndarray]:
+                       source: Any = None, linear: bool = False, radiance: bool = False) -> dict[str, np.ndarray]:
         """Relight a photo of any size and give every layer at full resolution.
 
         The networks run at their training resolution (the short side resized to ``res``);
@@ -647,22 +685,26 @@ class Relighter:
                 target's units), when known (a map captured on set): the *known-source* track of
                 :meth:`relight_linear` (quotient methods divide by it; relighting to it gives the
                 photo back). None: the decomposition's estimate.
-            linear: give ``relit`` as linear radiance instead of display values: the photo's linearised
-                units (sRGB decoded) times the exposure's gain, its sky in the same units, not clipped
-                (``colour.to_ldr`` of it is the display ``relit``). For measuring against a renderer; the
-                other layers stay display values.
+            linear: give ``relit`` as linear radiance instead of display values: the photo's linear
+                units (sRGB decoded, or a radiance photo's own) times the exposure's gain, its sky in the same
+                units, not clipped. For measuring against a renderer; the other layers stay display values.
+            radiance: ``image`` is linear radiance (float, any scale: a render's or an HDR photo's), not display
+                values. It is relit at a display-like level (:data:`RADIANCE_WHITE_QUANTILE`; ``exposure="keep"``
+                keeps that level for display), and a ``linear`` result is given back in its own units.
 
         Returns:
             numpy ``(H, W, C)`` display values in [0, 1]: ``relit``, ``albedo``, ``normals``
             (``0.5 * n + 0.5``), ``shadow`` (source), ``target_shadow``, ``shading`` (target
             shading, tone-mapped), ``sky_mask`` (C = 1).
         """
-        lin, _ = _as_image(image)
+        lin, _, gain = _as_radiance(image) if radiance else (*_as_image(image), 1.0)
         if lin.shape[0] != 1:
             raise ValueError(f"relight_layers takes one image, got a batch of {lin.shape[0]}")
         layers = self._relight_tensors(lin, target, world_to_camera, sky_mask, method, azimuth_deg, sky, new_sky,
                                        seed, sky_source=sky_source, exposure=exposure, fov_deg=fov_deg,
                                        pitch_deg=pitch_deg, source=source, linear=linear)
+        if linear:
+            layers["relit"] = layers["relit"] / gain
         return {k: v[0].permute(1, 2, 0).numpy() for k, v in layers.items()}
 
     def _stage(self, name: str) -> None:

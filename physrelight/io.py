@@ -206,12 +206,15 @@ class Photo:
         alpha: ``(H, W)`` float32 alpha of an RGBA photo in [0, 1], or None.
         notes: one line each about what was done to read it (turned upright, 16 bits taken at
             8, alpha dropped).
+        radiance: True for an ``.exr`` / ``.hdr`` photo: ``image`` is then linear radiance (float32, any
+            scale, non-negative), not display values.
     """
 
     image: np.ndarray
     fov_deg: float | None = None
     alpha: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    radiance: bool = False
 
 
 _EXIF_ORIENTATION, _EXIF_IFD = 0x0112, 0x8769
@@ -257,7 +260,8 @@ def _png_bit_depth(path: Path) -> int:
 
 
 def read_photo(path: str | os.PathLike) -> Photo:
-    """Read a PNG/JPEG photo upright, with its field of view, for relighting.
+    """Read a PNG/JPEG photo upright, with its field of view, for relighting; an ``.exr`` or ``.hdr`` photo as
+    linear radiance (``Photo.radiance``).
 
     Turned by its EXIF orientation (a phone's portrait photo is stored sideways). 16-bit
     photos are taken at 8 bits, RGBA and grey-with-alpha photos give their alpha separately (a mask
@@ -270,6 +274,15 @@ def read_photo(path: str | os.PathLike) -> Photo:
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"image {str(p)!r} does not exist")
+    if p.suffix.lower() in (".exr", ".hdr"):  # a render or an HDR photo: linear radiance, no EXIF
+        from physrelight import envmap
+
+        try:
+            rgb = envmap.read(p)  # float32 (H, W, 3), finite, non-negative, or a one-line ValueError
+        except OSError as err:
+            raise ValueError(f"cannot read {str(p)!r} as an image: {err}") from None
+        return Photo(np.ascontiguousarray(rgb, dtype=np.float32), None, None,
+                     ["linear radiance (an EXR or HDR photo): relit as radiance"], radiance=True)
     notes: list[str] = []
     try:
         with Image.open(p) as im:

@@ -225,3 +225,50 @@ def test_07b_the_apis_linear_relit_photo_is_the_display_one_before_its_curve(pho
         linear = relighter.relight(image, str(FOREST), exposure=exposure, linear=True)
         assert float(linear.min()) >= 0.0
         np.testing.assert_array_equal(colour.to_ldr(torch.from_numpy(linear)).numpy(), shown)
+
+
+def test_08_a_radiance_photo_is_relit_in_its_own_units(photo: Path, tmp_path: Path, capsys) -> None:
+    """A photo given as linear radiance (``radiance=True``; ``.exr`` / ``.hdr`` on the command line): a display
+    photo's own linear values relight as the display photo does (to float rounding); an HDR one is relit at a display-like
+    level, so scaling it by 10 scales the linear result by 10 (to rounding); relit to its own lighting on the known
+    track it comes back exactly, in its own units. The command line reads, writes and refuses EXR photos."""
+    import torch
+
+    from learned import Relighter
+    from physrelight import colour
+
+    relighter = Relighter.load()
+    display = io.read_image(photo)
+    linear = colour.from_ldr(torch.from_numpy(display)).numpy()
+    # to float rounding (the two decodings run on differently laid-out arrays)
+    np.testing.assert_allclose(relighter.relight(linear, str(FOREST), radiance=True),
+                               relighter.relight(display, str(FOREST)), atol=1e-5)
+    hdr = linear * 40.0  # its 99.9th-percentile luminance well above 1
+    one = relighter.relight(hdr, str(FOREST), radiance=True, linear=True)
+    ten = relighter.relight(hdr * 10.0, str(FOREST), radiance=True, linear=True)
+    np.testing.assert_allclose(ten, 10.0 * one, rtol=1e-4, atol=1e-6)
+    same = relighter.relight(hdr, str(FOREST), source=str(FOREST), method="quotient", new_sky=False,
+                             exposure="keep", radiance=True, linear=True)
+    np.testing.assert_allclose(same, hdr, rtol=1e-5)
+    # the command line: .exr in, .exr and .png out
+    src = tmp_path / "render.exr"
+    envmap.write(src, hdr)
+    for out in (tmp_path / "relit.exr", tmp_path / "relit.png"):
+        assert main(["relight", str(src), "--env", str(FOREST), "--quiet", "--threads", "1", "-o", str(out)]) == 0
+    assert "linear radiance" in capsys.readouterr().err  # the note
+    assert envmap.read(tmp_path / "relit.exr").shape == (52, 76, 3)
+    assert io.read_image(tmp_path / "relit.png").shape == (52, 76, 3)
+    bad = hdr.copy()
+    bad[3, 4, 0] = np.nan
+    import OpenEXR  # write the NaN as it is: envmap.write refuses it
+
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                      {"RGB": bad.astype(np.float32)}) as f:
+        f.write(str(tmp_path / "nan.exr"))
+    assert main(["relight", str(tmp_path / "nan.exr"), "--env", str(FOREST), "-o", str(tmp_path / "n.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "non-finite" in err and not (tmp_path / "n.png").exists()
+    with pytest.raises(ValueError, match="non-negative"):
+        relighter.relight(-hdr, str(FOREST), radiance=True)
+    with pytest.raises(ValueError, match="floats"):
+        relighter.relight(display.astype(np.uint8), str(FOREST), radiance=True)
