@@ -197,11 +197,12 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
 
 @dataclass
 class Photo:
-    """A photo as a camera wrote it: display values, upright, and what its metadata says.
+    """A photo as a camera wrote it: display values (or a render's linear radiance), upright, and what its
+    metadata says.
 
     Attributes:
         image: ``(H, W, 3)`` float32 display values in [0, 1] (sRGB-encoded), turned upright by
-            its EXIF orientation.
+            its EXIF orientation; linear radiance when ``radiance``.
         fov_deg: horizontal field of view from EXIF (:func:`exif_fov_deg`), or None.
         alpha: ``(H, W)`` float32 alpha of an RGBA photo in [0, 1], or None.
         notes: one line each about what was done to read it (turned upright, 16 bits taken at
