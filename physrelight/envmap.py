@@ -43,9 +43,9 @@ LUMINANCE = colour.LUMINANCE
 """Rec. 709 / linear sRGB luminance weights."""
 
 # DWA compression leaves small negative ringing around bright texels (seen down to
-# -2e-3 next to a 1.4e3 sun in the shared maps). Values above this are clamped to 0;
-# anything more negative is a broken map, not compression noise.
-DWA_NEGATIVE_TOLERANCE = 1e-2
+# -2e-3 next to a 1.4e3 sun in the shared maps): io.read_radiance clamps it, and refuses
+# anything more negative than this (a broken map, not compression noise).
+DWA_NEGATIVE_TOLERANCE = io.DWA_NEGATIVE_TOLERANCE
 
 
 def check_envmap(env: torch.Tensor, name: str = "env") -> None:
@@ -67,16 +67,10 @@ def read(path: str | os.PathLike) -> np.ndarray:
     """Read an EXR (or Radiance ``.hdr``) environment map as ``float32 (H, W, 3)``.
 
     The alpha channel, if any, is dropped. Slightly negative values from lossy (DWA)
-    compression are clamped to 0; NaN/inf or strongly negative values raise.
+    compression are clamped to 0; NaN/inf or strongly negative values raise
+    (:func:`physrelight.io.read_radiance`).
     """
-    rgb = io.read_hdr(path) if str(path).lower().endswith(".hdr") else io.read_exr(path)
-    if rgb.ndim != 3:
-        raise ValueError(f"{str(path)!r} must have R, G, B channels, found a single channel")
-    if not np.all(np.isfinite(rgb)):
-        raise ValueError(f"{str(path)!r} holds non-finite values (NaN or inf)")
-    if rgb.size and rgb.min() < -DWA_NEGATIVE_TOLERANCE * max(1.0, float(np.percentile(rgb, 99.9))):
-        raise ValueError(f"{str(path)!r} holds strongly negative radiance (min {rgb.min():.4g})")
-    return np.clip(rgb, 0.0, None)
+    return io.read_radiance(path)
 
 
 def write(path: str | os.PathLike, image: Array) -> None:

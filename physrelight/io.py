@@ -109,6 +109,29 @@ def read_exr(path: str | os.PathLike) -> np.ndarray:
     raise ValueError(f"{str(p)!r} must have R, G, B channels or a single channel, found {sorted(channels)}")
 
 
+DWA_NEGATIVE_TOLERANCE = 1e-2
+"""Lossy (DWA) EXR compression leaves small negative ringing round bright texels (seen down to -2e-3 next to a
+1.4e3 sun in the shared maps); below ``-DWA_NEGATIVE_TOLERANCE * max(1, p99.9)`` an image is refused, not
+clamped: a broken map, not compression noise."""
+
+
+def read_radiance(path: str | os.PathLike) -> np.ndarray:
+    """Read an EXR (or Radiance ``.hdr``) RGB image as linear radiance ``float32 (H, W, 3)``: an environment map,
+    a render, an HDR photo.
+
+    The alpha channel, if any, is dropped. Slightly negative values from lossy (DWA) compression are clamped to 0;
+    a single channel, NaN/inf or strongly negative values raise ``ValueError`` naming the file.
+    """
+    rgb = read_hdr(path) if str(path).lower().endswith(".hdr") else read_exr(path)
+    if rgb.ndim != 3:
+        raise ValueError(f"{str(path)!r} must have R, G, B channels, found a single channel")
+    if not np.all(np.isfinite(rgb)):
+        raise ValueError(f"{str(path)!r} holds non-finite values (NaN or inf)")
+    if rgb.size and rgb.min() < -DWA_NEGATIVE_TOLERANCE * max(1.0, float(np.percentile(rgb, 99.9))):
+        raise ValueError(f"{str(path)!r} holds strongly negative radiance (min {rgb.min():.4g})")
+    return np.clip(rgb, 0.0, None)
+
+
 def read_hdr(path: str | os.PathLike) -> np.ndarray:
     """Read a Radiance RGBE ``.hdr`` file as float32 ``(H, W, 3)`` linear radiance.
 
@@ -276,12 +299,7 @@ def read_photo(path: str | os.PathLike) -> Photo:
     if not p.is_file():
         raise ValueError(f"image {str(p)!r} does not exist")
     if p.suffix.lower() in (".exr", ".hdr"):  # a render or an HDR photo: linear radiance, no EXIF
-        from physrelight import envmap
-
-        try:
-            rgb = envmap.read(p)  # float32 (H, W, 3), finite, non-negative, or a one-line ValueError
-        except OSError as err:
-            raise ValueError(f"cannot read {str(p)!r} as an image: {err}") from None
+        rgb = read_radiance(p)  # float32 (H, W, 3), finite, non-negative, or a one-line ValueError
         return Photo(np.ascontiguousarray(rgb, dtype=np.float32), None, None,
                      ["linear radiance (an EXR or HDR photo): relit as radiance"], radiance=True)
     notes: list[str] = []
