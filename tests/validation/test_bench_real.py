@@ -44,6 +44,11 @@ def test_01_quick_run_writes_every_section_with_the_held_out_panorama_apart(quic
         assert set(c["stability"]) == set(CAMERA_VARIANTS)
         assert all(0.0 <= x <= 1.0 for v in c["stability"].values() for x in v.values())
     assert "Stability: the same crops as another camera setting" in md and "| warm cast |" in md
+    # (b)'s: the lighting estimated from each camera setting's photo, a scale-invariant error in [0, 1]
+    for c in report["crops"]:
+        assert set(c["lighting_stability"]) == set(CAMERA_VARIANTS)
+        assert all(0.0 <= v["shading_error"] <= 1.0 for v in c["lighting_stability"].values())
+    assert "`proposed`'s shading error when the crop comes as another camera setting" in md
 
 
 def test_02_the_ceilings_are_ceilings(quick) -> None:

@@ -132,8 +132,12 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
     out["no_sky_reason"] = why
     # ... and its stability: the same crop as other camera settings would have stored it
     out["stability"] = {}
+    variants = {}  # each camera setting's photo and mask, for (b)'s stability too
     for v, name in enumerate(CAMERA_VARIANTS):
-        m = relighter.photo_sky(camera_variant(lin, name, seed=seed * 1000 + crop.index * 10 + v))[0][0, 0].numpy()
+        lin_v = camera_variant(lin, name, seed=seed * 1000 + crop.index * 10 + v)
+        seg_v = relighter.photo_sky(lin_v)[0]
+        variants[name] = (lin_v, seg_v)
+        m = seg_v[0, 0].numpy()
         out["stability"][name] = {"iou": metrics.mask_iou(m, crop.sky),
                                   "boundary_f": metrics.boundary_f(m, crop.sky, BOUNDARY_TOLERANCE),
                                   "sky_called": float(m.mean())}
@@ -163,6 +167,16 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
         out["lighting"][name] = {"shading_error": shading_error(E, truth), "level_stops": level_stops(L, source)}
     E2 = np.asarray(sh.irradiance(crop.panorama.sh(2) * g[None, :], normals))
     out["lighting"]["truth_order2"] = {"shading_error": shading_error(E2, truth), "level_stops": 0.0}
+    # ... and the estimate's stability: the decomposition of each camera setting's photo, on its own mask (the
+    # scale-invariant error: an exposure changes the level only; a colour cast is a change of the light's colour
+    # to the photo, so it counts)
+    out["lighting_stability"] = {}
+    for name, (lin_v, seg_v) in variants.items():
+        L_v = relighter.relight_full_resolution(lin_v, seg_v, torch.from_numpy(source).float(),
+                                                source_lighting=torch.from_numpy(source).float(),
+                                                method="proposed")["working"]["lighting"][0].double().numpy()
+        out["lighting_stability"][name] = {"shading_error": shading_error(np.asarray(sh.irradiance(L_v, cam_normals)),
+                                                                          truth)}
     out["world_sh"] = {name: np.asarray(sh.rotate(L, R.T)).tolist() for name, L in estimates.items()}
 
     # (d) self-relighting: the target is the source; the output should be the photo. Also after each output's best

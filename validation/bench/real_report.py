@@ -78,6 +78,9 @@ def summarise(crops: Sequence[dict[str, Any]], samples: int) -> dict[str, Any]:
                             "boundary_f": iv(main, lambda c, v=v: c["stability"][v]["boundary_f"]),
                             "sky_called_without_sky": iv(noskies, lambda c, v=v: c["stability"][v]["sky_called"])}
                         for v in CAMERA_VARIANTS}
+    out["lighting_stability"] = {v: iv([c for c in main if "lighting_stability" in c],
+                                       lambda c, v=v: c["lighting_stability"][v]["shading_error"])
+                                 for v in CAMERA_VARIANTS}
     out["lighting"] = {e: {"shading_error": iv(main, lambda c, e=e: c["lighting"][e]["shading_error"]),
                            "abs_level_stops": iv(main, lambda c, e=e: abs(c["lighting"][e]["level_stops"])),
                            "level_stops": iv(main, lambda c, e=e: c["lighting"][e]["level_stops"]),
@@ -177,6 +180,14 @@ def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
               "gain, against the panorama's exact irradiance; `truth_order2` is the ceiling of any order-2 "
               "estimate):", ""]
     lines += _table(groups, s, ESTIMATES, lambda g, r: g["lighting"][r]["shading_error"], "estimate")
+    lines += ["", "Stability: `proposed`'s shading error when the crop comes as another camera setting would have "
+              "stored it (the settings of (a), each on its own mask). An exposure changes only the level, which this "
+              "error ignores; a colour cast is, to the photo, a change of the light's colour, so it counts:", ""]
+
+    def lighting_stability(g: dict[str, Any], row: str) -> Any:
+        return g["lighting"]["proposed"]["shading_error"] if row == "as is" else g["lighting_stability"].get(row)
+
+    lines += _table(groups, s, ("as is", *CAMERA_VARIANTS), lighting_stability, "camera")
     lines += ["", "Level error |log2(DC estimate / DC truth)| in stops (the estimate's units are the linearised "
               "photo's; the albedo-lighting scale is part of it):", ""]
     lines += _table(groups, s, ESTIMATES[:3], lambda g, r: g["lighting"][r]["abs_level_stops"], "estimate", 2)
