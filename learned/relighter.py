@@ -61,8 +61,9 @@ LIGHTING_ESTIMATORS = ("network", "source_map")
 """The source-lighting steps of :meth:`Relighter.decompose_linear`."""
 
 
-def _as_image(image: Any) -> tuple[torch.Tensor, str]:
-    """Photo -> ``(B, 3, H, W)`` linear float32 and how to give results back ("numpy", "chw", "bchw")."""
+def _as_batch(image: Any) -> tuple[torch.Tensor, str]:
+    """A photo's array -> ``(B, 3, H, W)`` as it is (no conversion) and how to give results back ("numpy", "chw",
+    "bchw"): the layouts and the least size both kinds of photo take."""
     if isinstance(image, np.ndarray):
         if image.ndim != 3 or image.shape[-1] != 3:
             raise ValueError(f"a numpy image must have shape (H, W, 3), got {image.shape}")
@@ -81,6 +82,12 @@ def _as_image(image: Any) -> tuple[torch.Tensor, str]:
         raise ValueError(f"image must be a numpy array or torch tensor, got {type(image).__name__}")
     if t.shape[-1] < 8 or t.shape[-2] < 8:
         raise ValueError(f"image must be at least 8x8 pixels, got {tuple(t.shape[-2:])}")
+    return t, kind
+
+
+def _as_image(image: Any) -> tuple[torch.Tensor, str]:
+    """Photo (display values) -> ``(B, 3, H, W)`` linear float32 and how to give results back (:func:`_as_batch`)."""
+    t, kind = _as_batch(image)
     if t.dtype in (torch.uint8,):
         t = t.float() / 255.0
     elif not t.is_floating_point():
@@ -100,20 +107,9 @@ def _as_radiance(image: Any) -> tuple[torch.Tensor, str, float]:
     the gain that brought it there (:data:`RADIANCE_WHITE_QUANTILE`; the photo's units are ``result / gain``)."""
     from physrelight.stats import quantile
 
-    if isinstance(image, np.ndarray):
-        if image.ndim != 3 or image.shape[-1] != 3:
-            raise ValueError(f"a numpy image must have shape (H, W, 3), got {image.shape}")
-        if not np.issubdtype(image.dtype, np.floating):
-            raise ValueError(f"a radiance photo must hold floats, got dtype {image.dtype}")
-        t, kind = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None], "numpy"
-    elif isinstance(image, torch.Tensor) and image.ndim in (3, 4) and image.shape[-3] == 3:
-        if not image.is_floating_point():
-            raise ValueError(f"a radiance photo must hold floats, got dtype {image.dtype}")
-        t, kind = (image[None], "chw") if image.ndim == 3 else (image, "bchw")
-    else:
-        raise ValueError("a radiance photo must be a numpy (H, W, 3) or torch (3, H, W) / (B, 3, H, W) float array")
-    if t.shape[-1] < 8 or t.shape[-2] < 8:
-        raise ValueError(f"image must be at least 8x8 pixels, got {tuple(t.shape[-2:])}")
+    t, kind = _as_batch(image)
+    if not t.is_floating_point():
+        raise ValueError(f"a radiance photo must hold floats, got dtype {t.dtype}")
     t = t.detach().float().cpu()
     if not bool(torch.isfinite(t).all()):
         raise ValueError("a radiance photo must be finite (it holds NaN or inf)")
