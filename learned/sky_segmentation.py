@@ -514,10 +514,11 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor,
                             else torch.sigmoid(model(x)) for x in smalls]).mean(0)
     masks, reasons = [], []
     for b in range(image.shape[0]):
+        lum = (image[b: b + 1] * image.new_tensor(_LUMA)[None, :, None, None]).sum(1, keepdim=True)  # full size
         noise_var = None
         if SMOOTHNESS_NOISE_AWARE and SMOOTHNESS_NOISE_AT_OWN_SIZE:
             # the noise is read off the photo as it came, and carried through the resizing to the working size
-            sigma_d = display_noise_sigma((image[b] * image.new_tensor(_LUMA)[:, None, None]).sum(0))
+            sigma_d = display_noise_sigma(lum[0, 0])
             lum_small = (small[b] * small.new_tensor(_LUMA)[:, None, None]).sum(0)
             gain = resized_noise_roughness(tuple(image.shape[-2:]), tuple(small.shape[-2:]))
             noise_var = gain * log_noise_sigma(lum_small, sigma_d.to(lum_small.dtype)) ** 2
@@ -527,7 +528,6 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor,
         if not bool(kept.any()):
             masks.append(torch.zeros(1, 1, *image.shape[-2:], dtype=torch.bool))
             continue
-        lum = (image[b: b + 1] * image.new_tensor(_LUMA)[None, :, None, None]).sum(1, keepdim=True)
         guide = torch.log(lum.clamp_min(1e-3)).to(p.dtype)
         up = guided_upsample(guide, p.to(guide.dtype), eps=eps) > threshold
         if band > 0:
