@@ -45,7 +45,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-from learned.relighter import estimate_pitch, fitted_sky, target_sky
+from learned.relighter import estimate_pitch, fitted_sky, target_sky, working_resolution
 from learned.source_lighting import grey_world_level
 from physrelight import colour, envmap, metrics, panorama, sh
 
@@ -172,9 +172,9 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
     # to the photo, so it counts)
     out["lighting_stability"] = {}
     for name, (lin_v, seg_v) in variants.items():
-        L_v = relighter.relight_full_resolution(lin_v, seg_v, torch.from_numpy(source).float(),
-                                                source_lighting=torch.from_numpy(source).float(),
-                                                method="proposed")["working"]["lighting"][0].double().numpy()
+        # the decomposition alone, as relight_full_resolution makes it (no relighting: only its lighting is scored)
+        small, small_sky = working_resolution(relighter.denoised(lin_v), seg_v, relighter.res)
+        L_v = relighter.decompose_linear(small.float(), small_sky.bool())["lighting"][0].double().numpy()
         out["lighting_stability"][name] = {"shading_error": shading_error(np.asarray(sh.irradiance(L_v, cam_normals)),
                                                                           truth)}
     out["world_sh"] = {name: np.asarray(sh.rotate(L, R.T)).tolist() for name, L in estimates.items()}
