@@ -42,6 +42,11 @@ with SkyGAN, ``keep`` keeps the photo's. ``--exposure auto`` (default)
 meters the relit photo as a camera would (the foreground to the photo's key, middle grey for
 a dark photo, never clipping the sky); ``keep`` keeps the camera's settings; a number adds
 stops to ``keep``. ``--sequence N`` sweeps the azimuth over 360 degrees in N frames (GIF).
+
+``--layers DIR`` writes ``relit``, ``sky_mask`` (white = sky) and the decomposition's layers. Those
+(:data:`DECOMPOSITION_LAYERS`) are computed over the whole photo but describe surfaces, so on the sky they
+mean nothing: they are written as RGBA, transparent on the sky (their colour values kept), so that a viewer
+shows the foreground's albedo, normals, shadows and shading alone.
 """
 
 from __future__ import annotations
@@ -56,9 +61,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PROGRESS_PIXELS", "add_parser", "sun_direction"]
+__all__ = ["DECOMPOSITION_LAYERS", "PROGRESS_PIXELS", "add_parser", "layer_with_alpha", "sun_direction"]
 
 PROGRESS_PIXELS = 1_000_000
+DECOMPOSITION_LAYERS = ("albedo", "normals", "shadow", "target_shadow", "shading")
+"""The layers of ``--layers`` that describe surfaces: written transparent on the sky (:func:`layer_with_alpha`)."""
 """A single relighting of a photo this large (pixels) or larger shows its stages on stderr unless ``--quiet``:
 about 5 s at one thread for 2000 x 1334, 40 s for 4000 x 2669 (docs/bench.md)."""
 
@@ -89,6 +96,18 @@ def _stage_bar(relighter: Any, enabled: bool) -> Iterator[None]:
     finally:
         relighter.on_stage = None
         bar.close()
+
+
+def layer_with_alpha(layer: np.ndarray, sky: np.ndarray) -> np.ndarray:
+    """A surface layer ``(H, W, C)`` in [0, 1] (C = 3, or 1 for a shadow) with an alpha channel, 0 on the sky
+    ``(H, W)`` bool and 1 elsewhere: ``(H, W, C + 1)``, its values unchanged. Without sky it is returned as it is."""
+    if layer.ndim != 3 or layer.shape[-1] not in (1, 3):
+        raise ValueError(f"layer must have shape (H, W, 1) or (H, W, 3), got {layer.shape}")
+    if sky.shape != layer.shape[:2]:
+        raise ValueError(f"sky must have shape {layer.shape[:2]}, got {sky.shape}")
+    if not sky.any():
+        return layer
+    return np.concatenate([layer, (~sky)[..., None].astype(layer.dtype)], axis=-1)
 
 
 def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
@@ -260,8 +279,9 @@ def _relight(args: argparse.Namespace) -> int:
     if args.layers is not None:
         d = Path(args.layers)
         d.mkdir(exist_ok=True)
+        sky = layers["sky_mask"][..., 0] > 0.5
         for name, img in layers.items():
-            io.write_png(d / f"{name}.png", img)
+            io.write_png(d / f"{name}.png", layer_with_alpha(img, sky) if name in DECOMPOSITION_LAYERS else img)
         print(f"layers ({', '.join(layers)}) -> {d}")
     print(f"relit {image.shape[1]}x{image.shape[0]} -> {out}")
     return 0
@@ -318,7 +338,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "docs/experiments/37)")
     p.add_argument("--keep-sky", action="store_true", help="keep the photo's sky (same as --sky-source keep)")
     p.add_argument("--seed", type=int, default=0, help="SkyGAN noise seed (default: 0)")
-    p.add_argument("--layers", default=None, help="also write albedo, normals, shadows, shading, sky mask here")
+    p.add_argument("--layers", default=None, help="also write albedo, normals, shadows, shading (RGBA: transparent on the sky, where they "
+                        "describe nothing) and the sky mask (white = sky) into this folder")
     p.add_argument("--sequence", type=positive_int, default=None, metavar="N",
                    help="sweep the azimuth over 360 degrees in N frames; write an animated GIF")
     p.add_argument("--fps", type=positive_number, default=12.0, help="GIF frame rate (default: 12)")

@@ -366,13 +366,14 @@ def read_mask(path: str | os.PathLike) -> np.ndarray:
 
 
 def write_png(path: str | os.PathLike, image: Array) -> None:
-    """Write display values ``(H, W, 3)`` or ``(H, W)`` in [0, 1] as an 8-bit PNG (rounded, clipped)."""
+    """Write display values ``(H, W)``, ``(H, W, 1)``, ``(H, W, 3)`` or with alpha ``(H, W, 2)`` (grey) /
+    ``(H, W, 4)`` (RGB) in [0, 1] as an 8-bit PNG (rounded, clipped)."""
     from PIL import Image
 
     t, _ = to_tensor(image, "image")
     arr = t.detach().cpu().numpy()
-    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[-1] not in (1, 3, 4)):
-        raise ValueError(f"image must have shape (H, W), (H, W, 3) or (H, W, 4), got {arr.shape}")
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[-1] not in (1, 2, 3, 4)):
+        raise ValueError(f"image must have shape (H, W) or (H, W, C) with C in 1-4, got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError("image holds NaN or inf")
     if arr.ndim == 3 and arr.shape[-1] == 1:

@@ -272,3 +272,43 @@ def test_08_a_radiance_photo_is_relit_in_its_own_units(photo: Path, tmp_path: Pa
         relighter.relight(-hdr, str(FOREST), radiance=True)
     with pytest.raises(ValueError, match="floats"):
         relighter.relight(display.astype(np.uint8), str(FOREST), radiance=True)
+
+
+def test_09_surface_layers_are_transparent_on_the_sky_and_keep_their_values(photo: Path, tmp_path: Path) -> None:
+    """``--layers``: albedo, normals, shadows and shading describe surfaces, so they are written transparent on the
+    sky (alpha 0 there, 1 elsewhere) with their values unchanged; ``relit`` and ``sky_mask`` have no alpha. A
+    layer of a photo without sky is written as it is, and a layer or mask of the wrong shape is refused."""
+    from PIL import Image
+
+    from learned.relight_cli import DECOMPOSITION_LAYERS, layer_with_alpha
+
+    rng = np.random.default_rng(1)
+    layer, shadow = rng.uniform(0, 1, (5, 7, 3)), rng.uniform(0, 1, (5, 7, 1))
+    sky = np.zeros((5, 7), bool)
+    sky[:2, 3:] = True
+    rgba, la = layer_with_alpha(layer, sky), layer_with_alpha(shadow, sky)
+    assert rgba.shape == (5, 7, 4) and la.shape == (5, 7, 2)
+    np.testing.assert_array_equal(rgba[..., :3], layer)
+    np.testing.assert_array_equal(la[..., :1], shadow)
+    np.testing.assert_array_equal(rgba[..., 3], (~sky).astype(float))
+    assert layer_with_alpha(layer, np.zeros((5, 7), bool)) is layer
+    with pytest.raises(ValueError, match=r"\(H, W, 1\) or \(H, W, 3\)"):
+        layer_with_alpha(rng.uniform(0, 1, (5, 7, 2)), sky)
+    with pytest.raises(ValueError, match="sky must have shape"):
+        layer_with_alpha(layer, sky[:, :6])
+    # the command line, with a user's mask of the top rows
+    mask = np.zeros((52, 76), bool)
+    mask[:12] = True
+    io.write_png(tmp_path / "mask.png", mask.astype(np.float32))
+    ldir = tmp_path / "L"
+    assert main(["relight", str(photo), "--sun", "20", "120", "--mask", str(tmp_path / "mask.png"), "--layers",
+                 str(ldir), "--quiet", "--threads", "1", "-o", str(tmp_path / "r.png")]) == 0
+    modes = {}
+    for p in ldir.glob("*.png"):
+        with Image.open(p) as im:
+            modes[p.stem] = im.mode
+            a = np.asarray(im)
+        if p.stem in DECOMPOSITION_LAYERS:
+            np.testing.assert_array_equal(a[..., -1], np.where(mask, 0, 255))
+    assert modes == {"relit": "RGB", "sky_mask": "L", "albedo": "RGBA", "normals": "RGBA", "shading": "RGBA",
+                     "shadow": "LA", "target_shadow": "LA"}
