@@ -28,7 +28,7 @@ from . import checkpoint as ckpt
 from .data import resize_short_side
 from .networks import UNet
 
-__all__ = ["DUSK_SKY", "SEGMENT_RES", "WIDE_AUGMENT", "SkySegmenter", "dusk_sky", "grow_sky_by_colour", "is_monochrome", "jpeg_like", "label_components", "load_sky_segmenter", "photometric_augment", "plausible_sky",
+__all__ = ["CLOUD_SKY", "DUSK_SKY", "SEGMENT_RES", "WIDE_AUGMENT", "SkySegmenter", "cloud_sky", "dusk_sky", "grow_sky_by_colour", "is_monochrome", "jpeg_like", "label_components", "load_sky_segmenter", "photometric_augment", "plausible_sky",
            "refine_sky_boundary", "segment_sky", "sky_colour_model", "sky_mask_full_resolution", "sky_probability"]
 
 _LUMA = colour.LUMINANCE
@@ -242,6 +242,83 @@ def dusk_sky(image: torch.Tensor, sky: torch.Tensor, generator: torch.Generator)
         blue = math.exp(d["blue"][0] + (d["blue"][1] - d["blue"][0]) * float(r[3]))
         g = image.new_tensor([gain * red, gain, gain * blue]).reshape(3, 1, 1)
         out[b] = torch.where(sky[b], image[b] * g, image[b])
+    return out
+
+
+CLOUD_SKY = {"probability": 0.5, "cover": (0.15, 0.85), "stops": (-3.0, 1.0), "horizon": 0.5, "stretch": (1.0, 3.0)}
+"""The cloud draw of :func:`cloud_sky`: how often, the share of the sky covered, the clouds' brightness in stops
+against the sky's mean, how often they gather towards the bottom of the sky, and their horizontal stretch."""
+
+
+def _fractal_noise(h: int, w: int, stretch: float, generator: torch.Generator) -> torch.Tensor:
+    """``(H, W)`` zero-mean, unit-variance noise with structure at several scales: four octaves of Gaussian
+    noise on coarse grids (3 ... 24 rows, and ``stretch`` times fewer columns than square cells would need:
+    clouds seen towards the horizon are flattened), each brought up bilinearly, weighted 1, 1/2, 1/4, 1/8."""
+    f = torch.zeros(h, w, dtype=torch.float64)
+    for k in range(4):
+        gh = 3 * 2 ** k
+        gw = max(2, int(round(gh * w / (stretch * max(h, 1)))))
+        g = torch.randn(1, 1, gh + 1, gw + 1, generator=generator, dtype=torch.float64)
+        f += 0.5 ** k * F.interpolate(g, size=(h, w), mode="bilinear", align_corners=True)[0, 0]
+    return (f - f.mean()) / f.std().clamp_min(1e-12)
+
+
+def cloud_sky(image: torch.Tensor, sky: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    """Put clouds in the sky of some photos: dark cloud banks at dusk, grey or white clouds by day.
+
+    Our renders' skies are sky models and panoramas seen at 64 px: clear gradients, so the segmenter
+    takes a textured band of dark cloud along the horizon for land (scikit-image's rocket.jpg). With
+    probability ``CLOUD_SKY["probability"]`` a photo's sky pixels get a cloud layer (linear values, before
+    the camera of :func:`photometric_augment`): coverage ``alpha = sigmoid((f - t) / s)`` of a fractal
+    noise ``f`` (:func:`_fractal_noise`), its threshold ``t`` the noise's quantile leaving a share
+    ``U(0.15, 0.85)`` covered, softness ``s ~ U(0.05, 0.5)``; half of the time the cover gathers towards
+    the bottom of the sky (``alpha`` times ``(row / H) ** U(0.5, 3)`` over its largest value on the sky). The cloud's
+    colour is the sky's mean luminance times ``2 ** U(-3, 1)`` (a dark bank to a sunlit white), its
+    chromaticity between neutral and the sky's own (``U(0, 1)``), shaded within by ``exp(0.25 g)`` of a second
+    noise ``g``. The foreground and the mask are kept: clouds are sky.
+
+    Args:
+        image: ``(B, 3, H, W)`` linear. sky: ``(B, 1, H, W)`` bool. generator: the draws.
+
+    Returns:
+        ``(B, 3, H, W)`` linear.
+    """
+    _check_image(image)
+    if sky.shape != (image.shape[0], 1, *image.shape[-2:]) or sky.dtype != torch.bool:
+        raise ValueError(f"sky must be a bool tensor of shape {(image.shape[0], 1, *image.shape[-2:])}, got "
+                         f"{sky.dtype} {tuple(sky.shape)}")
+    d = CLOUD_SKY
+    h, w = image.shape[-2:]
+    out = image.clone()
+    luma = image.new_tensor(_LUMA).double()
+
+    def u(lo: float, hi: float) -> float:
+        return lo + (hi - lo) * float(torch.rand(1, generator=generator, dtype=torch.float64))
+
+    for b in range(image.shape[0]):
+        # every draw is made for every photo, so that one photo's sky does not shift the next one's clouds
+        draw = u(0.0, 1.0)
+        cover, soft, stops, tint = u(*d["cover"]), u(0.05, 0.5), u(*d["stops"]), u(0.0, 1.0)
+        gather, power, stretch = u(0.0, 1.0) < d["horizon"], u(0.5, 3.0), u(*d["stretch"])
+        f = _fractal_noise(h, w, stretch, generator)
+        g = _fractal_noise(h, w, stretch, generator)
+        m = sky[b, 0]
+        if draw >= d["probability"] or int(m.sum()) < 4:
+            continue
+        x = image[b].double()
+        t = torch.quantile(f[m], 1.0 - cover)
+        alpha = torch.sigmoid((f - t) / soft)
+        if gather:
+            rows = ((torch.arange(h, dtype=torch.float64) + 0.5) / h)[:, None] ** power
+            alpha = alpha * rows / rows.expand(h, w)[m].max()
+        mean_rgb = x[:, m].mean(1)
+        lum = float((mean_rgb * luma).sum())
+        if lum <= 0:
+            continue
+        chroma = (1.0 - tint) + tint * mean_rgb / lum  # luminance 1: neutral, or the sky's own colour
+        cloud = lum * 2.0 ** stops * chroma[:, None, None] * torch.exp(0.25 * g)[None]
+        mixed = (1.0 - alpha)[None] * x + alpha[None] * cloud
+        out[b] = torch.where(m, mixed.to(image.dtype), image[b])
     return out
 
 

@@ -44,7 +44,7 @@ from .data import evenly_spread, load_photo
 from .discriminators import MultiscaleDiscriminator, feature_matching_loss, lsgan_loss
 from .networks import count_parameters
 from .sky_gan import LOG_EPS, SkyGenerator, condition_map, generate_sky, lighting_scale
-from .sky_segmentation import SkySegmenter, dusk_sky, photometric_augment, segment_sky
+from .sky_segmentation import SkySegmenter, cloud_sky, dusk_sky, photometric_augment, segment_sky
 from .runs import RunConfig, RunLogs, display
 
 __all__ = ["RealCrops", "SkyTrainConfig", "SkyData", "evaluate_segmentation", "export_sky", "mirror_lighting",
@@ -80,6 +80,7 @@ class SkyTrainConfig(RunConfig):
     d_width: int = 16
     augment: bool = True
     wide_augment: bool = False
+    clouds: bool = False
     real_panoramas: str | None = None
     real_exclude: tuple[str, ...] = ()
     real_fraction: float = 0.5
@@ -404,6 +405,8 @@ def train_sky(config: SkyTrainConfig) -> dict[str, Any]:
             shown = terms["g"]
         else:
             if config.augment:
+                if config.clouds:  # its own stream: every other draw of the step is as without it
+                    image = cloud_sky(image, sky, _step_generator(config.seed, step, 4))
                 if config.wide_augment:
                     image = dusk_sky(image, sky, _step_generator(config.seed, step, 3))
                 image = photometric_augment(image, _step_generator(config.seed, step, 2), wide=config.wide_augment)
