@@ -142,6 +142,33 @@ def test_photometric_augment_is_seeded_and_photographic():
     assert torch.allclose(torch.round(_srgb(a) * 255), _srgb(a) * 255, atol=1e-3)  # quantised like a PNG
 
 
+def test_cloud_sky_puts_clouds_in_the_sky_only_seeded_and_within_its_draws():
+    """``cloud_sky``: the foreground is kept bit for bit; a sky that gets clouds has texture (its rows are no
+    longer constant) and keeps the clouds within the sky's mean luminance times 2^[-3, 1] times their shading;
+    about half of the photos get clouds; the same generator state gives the same clouds; bad shapes are refused."""
+    from learned.sky_segmentation import CLOUD_SKY, cloud_sky
+
+    b, h, w = 64, 24, 32
+    x = torch.zeros(b, 3, h, w)
+    x[:, :, :10] = torch.tensor([0.2, 0.35, 0.7])[:, None, None]  # a flat blue sky on the top ten rows
+    x[:, :, 10:] = torch.rand(b, 3, h - 10, w, generator=torch.Generator().manual_seed(0)) * 0.5
+    sky = torch.zeros(b, 1, h, w, dtype=torch.bool)
+    sky[:, :, :10] = True
+    y = cloud_sky(x, sky, torch.Generator().manual_seed(1))
+    assert torch.equal(y[:, :, 10:], x[:, :, 10:])
+    assert torch.equal(y, cloud_sky(x, sky, torch.Generator().manual_seed(1)))
+    clouded = (y != x).flatten(1).any(1)
+    n = int(clouded.sum())
+    assert abs(n - CLOUD_SKY["probability"] * b) <= 3 * (b * 0.25) ** 0.5  # binomial, 3 sigma
+    lum0 = float((x[0, :, 0, 0] * torch.tensor([0.2126, 0.7152, 0.0722])).sum())
+    ly = (y[clouded][:, :, :10] * torch.tensor([0.2126, 0.7152, 0.0722])[:, None, None]).sum(1)
+    # the sky's mixture of itself and a cloud no darker than 2^-3 x exp(-0.25 x 5 sigma) of its luminance
+    assert float(ly.min()) >= lum0 * 2.0 ** -3 * math.exp(-0.25 * 5) - 1e-6
+    assert float(ly.std(dim=(1, 2)).min()) > 1e-3  # textured, not a uniform tint
+    with pytest.raises(ValueError, match="sky must be a bool tensor"):
+        cloud_sky(x, sky.float(), torch.Generator())
+
+
 def _srgb(x: torch.Tensor) -> torch.Tensor:
     from physrelight import colour
 
@@ -203,12 +230,12 @@ def test_sky_gan_steps_run_with_finite_losses(tiny_dataset, tmp_path):
     assert "keep_source_sky" in figs["relight"]
 
 
-@pytest.mark.parametrize("stage", ["sky", "segmentation"])
-def test_resume_is_bit_identical(tiny_dataset, tmp_path, stage):
-    straight = _config(tiny_dataset, tmp_path / "a", stage, steps=6)
+@pytest.mark.parametrize("stage,extra", [("sky", {}), ("segmentation", {}), ("segmentation", {"clouds": True})])
+def test_resume_is_bit_identical(tiny_dataset, tmp_path, stage, extra):
+    straight = _config(tiny_dataset, tmp_path / "a", stage, steps=6, **extra)
     train_sky(straight)
-    train_sky(_config(tiny_dataset, tmp_path / "b", stage, steps=3))  # "killed" after its step-3 checkpoint
-    train_sky(_config(tiny_dataset, tmp_path / "b", stage, steps=6))  # the same command again resumes
+    train_sky(_config(tiny_dataset, tmp_path / "b", stage, steps=3, **extra))  # "killed" after its step-3 checkpoint
+    train_sky(_config(tiny_dataset, tmp_path / "b", stage, steps=6, **extra))  # the same command again resumes
     a = load_file(str(tmp_path / "a" / "checkpoints" / "step_0000006.safetensors"))
     b = load_file(str(tmp_path / "b" / "checkpoints" / "step_0000006.safetensors"))
     assert a.keys() == b.keys() and any(k.startswith("optim.") for k in a)
@@ -217,7 +244,7 @@ def test_resume_is_bit_identical(tiny_dataset, tmp_path, stage):
     ra, rb = _rows(tmp_path / "a" / "train.csv"), _rows(tmp_path / "b" / "train.csv")
     assert [r[:-1] for r in ra] == [r[:-1] for r in rb]  # every logged loss, seconds aside
     with pytest.raises(ValueError, match="another configuration"):
-        train_sky(_config(tiny_dataset, tmp_path / "b", stage, steps=8, seed=1))
+        train_sky(_config(tiny_dataset, tmp_path / "b", stage, steps=8, seed=1, **extra))
 
 
 def test_export_and_load_round_trip(tiny_dataset, tmp_path):
