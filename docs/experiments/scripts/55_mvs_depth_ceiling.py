@@ -3,8 +3,13 @@ by repeated 3 x 3 means of log depth, beside the true depth.
 
     .venv/bin/python docs/experiments/scripts/55_mvs_depth_ceiling.py data/val5 data/heldout data/heldout3
 """
-import sys, importlib, numpy as np, torch
-sys.path.insert(0, '/work/main/docs/experiments/scripts')
+import importlib
+import sys
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 torch.set_num_threads(2)
 study = importlib.import_module("42_ground_depth_study")
 probe = study.probe
@@ -34,7 +39,6 @@ class MVSPhotos(probe.GroundPhotos):
         if key not in self._depth:
             d = self.ds.load(v.scene, v.view, None, keys=("mvs_depth",))["mvs_depth"]
             self._depth[key] = fill_holes(to_chw(d)[None].double())
-        vd = self.view(v)
         ph = self.photo(v, light)
         return self._depth[key], ph["normals"], ~ph["sky"]
 
