@@ -207,6 +207,14 @@ def photometric_augment(image: torch.Tensor, generator: torch.Generator, wide: b
     return torch.stack(out)
 
 
+def _check_image_and_sky(image: torch.Tensor, sky: torch.Tensor) -> None:
+    """``image (B, 3, H, W)`` and its sky ``(B, 1, H, W)`` bool, or a ValueError naming the bad one."""
+    _check_image(image)
+    if sky.shape != (image.shape[0], 1, *image.shape[-2:]) or sky.dtype != torch.bool:
+        raise ValueError(f"sky must be a bool tensor of shape {(image.shape[0], 1, *image.shape[-2:])}, got "
+                         f"{sky.dtype} {tuple(sky.shape)}")
+
+
 DUSK_SKY = {"probability": 0.3, "stops": (-3.0, -0.5), "red": (-0.5, 0.0), "blue": (0.0, 0.3)}
 """The dusk-sky draw of :func:`dusk_sky`: how often, how many stops darker, and the log gains of red and blue."""
 
@@ -226,10 +234,7 @@ def dusk_sky(image: torch.Tensor, sky: torch.Tensor, generator: torch.Generator)
     Returns:
         ``(B, 3, H, W)`` linear.
     """
-    _check_image(image)
-    if sky.shape != (image.shape[0], 1, *image.shape[-2:]) or sky.dtype != torch.bool:
-        raise ValueError(f"sky must be a bool tensor of shape {(image.shape[0], 1, *image.shape[-2:])}, got "
-                         f"{sky.dtype} {tuple(sky.shape)}")
+    _check_image_and_sky(image, sky)
     d = DUSK_SKY
     out = image.clone()
     for b in range(image.shape[0]):
@@ -283,10 +288,7 @@ def cloud_sky(image: torch.Tensor, sky: torch.Tensor, generator: torch.Generator
     Returns:
         ``(B, 3, H, W)`` linear.
     """
-    _check_image(image)
-    if sky.shape != (image.shape[0], 1, *image.shape[-2:]) or sky.dtype != torch.bool:
-        raise ValueError(f"sky must be a bool tensor of shape {(image.shape[0], 1, *image.shape[-2:])}, got "
-                         f"{sky.dtype} {tuple(sky.shape)}")
+    _check_image_and_sky(image, sky)
     d = CLOUD_SKY
     h, w = image.shape[-2:]
     out = image.clone()
