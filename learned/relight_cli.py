@@ -205,6 +205,8 @@ def _relight(args: argparse.Namespace) -> int:
 
     torch.set_num_threads(args.threads)
     out = Path(args.output)
+    if args.sequence and args.layers is not None:
+        raise ValueError("--layers writes the layers of one relit photo; it does not go with --sequence")
     if args.sequence and out.suffix.lower() != ".gif":
         raise ValueError(f"output must be a .gif file with --sequence, got {str(out)!r}")
     if not args.sequence and out.suffix.lower() not in (".png", ".exr"):

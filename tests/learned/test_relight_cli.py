@@ -105,6 +105,7 @@ def test_03_sequence_writes_an_animated_gif_that_changes(photo: Path, tmp_path: 
     ("ok", ["--sun", "0", "90", "--sky", "clear"], "above the horizon"),
     ("ok", ["--sun", "20", "0", "--mask", "SMALLMASK"], "mask"),
     ("ok", ["--sun", "20", "0", "--sequence", "2"], r"\.gif"),
+    ("ok", ["--sun", "20", "0", "--sequence", "2", "--layers", "TMPDIR"], "does not go with --sequence"),
 ])
 def test_04_bad_input_is_one_line_and_non_zero(photo: Path, tmp_path: Path, capsys, make: str, args: list[str],
                                                match: str) -> None:
