@@ -205,7 +205,7 @@ def _train_sky_stage(args: argparse.Namespace) -> int:
                          res=args.res, batch=args.batch, steps=args.steps, lr=args.lr, lr_d=args.lr_d, seed=args.seed,
                          augment=not args.no_augment, val_every=args.val_every, val_images=args.val_images,
                          ckpt_every=args.ckpt_every, log_every=args.log_every, threads=args.threads, weights=weights,
-                         progress=not args.quiet, wide_augment=args.wide_augment, clouds=args.clouds,
+                         progress=not args.quiet, wide_augment=args.wide_augment, dusk=args.dusk, clouds=args.clouds,
                          real_panoramas=args.real_panoramas,
                          real_exclude=tuple(args.real_exclude or ()), real_fraction=args.real_fraction,
                          real_views=args.real_views)
@@ -258,6 +258,9 @@ def _add_sky_stages(tsub: argparse._SubParsersAction) -> None:
         p.add_argument("--wide-augment", action="store_true",
                        help="segmentation: the wider camera (+-2 EV, white balance, dusk tints, JPEG-like blocks; "
                             "learned.sky_segmentation.WIDE_AUGMENT) and darkened dusk skies (dusk_sky)")
+        p.add_argument("--dusk", action="store_true",
+                       help="segmentation: darken and blue 30 %% of the photos' skies (learned.sky_segmentation.dusk_sky, "
+                            "which --wide-augment also applies) and nothing else of the wider camera (study 57)")
         p.add_argument("--clouds", action="store_true",
                        help="segmentation: put clouds in half of the photos' skies, from dark dusk banks to white "
                             "(learned.sky_segmentation.cloud_sky; study 52)")

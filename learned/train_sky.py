@@ -80,6 +80,7 @@ class SkyTrainConfig(RunConfig):
     d_width: int = 16
     augment: bool = True
     wide_augment: bool = False
+    dusk: bool = False
     clouds: bool = False
     real_panoramas: str | None = None
     real_exclude: tuple[str, ...] = ()
@@ -407,7 +408,7 @@ def train_sky(config: SkyTrainConfig) -> dict[str, Any]:
             if config.augment:
                 if config.clouds:  # its own stream: every other draw of the step is as without it
                     image = cloud_sky(image, sky, _step_generator(config.seed, step, 4))
-                if config.wide_augment:
+                if config.wide_augment or config.dusk:
                     image = dusk_sky(image, sky, _step_generator(config.seed, step, 3))
                 image = photometric_augment(image, _step_generator(config.seed, step, 2), wide=config.wide_augment)
             logits = model["seg"](image)
