@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from collections.abc import Iterator
 from typing import Callable
 
 import numpy as np
@@ -107,7 +108,8 @@ def relit_scores(pred: torch.Tensor, target: torch.Tensor, fg: torch.Tensor) -> 
             "ciede2000": metrics.delta_e2000(pred, target, m, encoding="srgb", reduction="none").numpy()}
 
 
-def case_batches(ds: SynthDataset, cases: list, res: int = 64, batch_size: int = 16, progress: bool = False):
+def case_batches(ds: SynthDataset, cases: list, res: int = 64, batch_size: int = 16, progress: bool = False
+                 ) -> Iterator[tuple[dict[str, torch.Tensor], list[str], int]]:
     """Batches of the scorable relighting cases of ``ds``, in order: yields ``(batch, scenes, saturated)``.
 
     ``batch`` stacks :func:`load_case`'s tensors (``(B, ...)``), ``scenes`` names each case's scene, and

@@ -43,6 +43,7 @@ import torch
 import torch.nn.functional as F
 
 from physrelight import camera, colour, image_model, losses, metrics, sh
+from physrelight.lighting_prior import LightingPrior
 from physrelight.quotient import SMOOTH_RADIUS, quotient_relight
 
 from .data import Batch
@@ -131,7 +132,7 @@ def _foreground_ldr(x: torch.Tensor, fg: torch.Tensor) -> torch.Tensor:
 
 
 def renderer_losses(renderer: NeuralRenderer, discriminator: MultiscaleDiscriminator | None,
-                    inverse: torch.nn.Module, shadow_net: torch.nn.Module, prior, batch: Batch,
+                    inverse: torch.nn.Module, shadow_net: torch.nn.Module, prior: LightingPrior, batch: Batch,
                     decomposition: dict[str, torch.Tensor], weights: RendererWeights = RendererWeights(),
                     phase: int = 1, cross_scale: int = 4, cross_match_scale: bool = True
                     ) -> tuple[torch.Tensor, dict[str, float], dict[str, torch.Tensor]]:

@@ -35,11 +35,13 @@ import torch
 import torch.distributed as dist
 
 from physrelight import image_model, io
+from physrelight.lighting_prior import LightingPrior
 
 from . import checkpoint as ckpt
 from .data import PairSampler, check_under_ev
 from .evaluate import evaluate
 from .lighting import load_prior
+
 from .networks import LIGHTING_SOLVES, InverseNet, ShadowNet, count_parameters, load_inverse, load_network
 from .objectives import LossWeights, decompose_and_solve, inverse_losses
 from .runs import RunConfig, RunLogs, display
@@ -290,7 +292,7 @@ def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
     return {"step": config.steps, "train_seconds": seconds, "val": metrics}
 
 
-def validate(inverse: torch.nn.Module, prior, config: TrainConfig, shadow_net: torch.nn.Module | None = None,
+def validate(inverse: torch.nn.Module, prior: LightingPrior, config: TrainConfig, shadow_net: torch.nn.Module | None = None,
              panel: Path | None = None) -> dict[str, float]:
     """Metrics on held-out scenes (``val_data`` or the ``val`` split of ``data``) + a panel."""
     inverse.eval()

@@ -37,11 +37,13 @@ import torch
 from torch import nn
 
 from physrelight import io
+from physrelight.lighting_prior import LightingPrior
 
 from . import checkpoint as ckpt
 from .data import Batch, PairSampler
 from .discriminators import MultiscaleDiscriminator
 from .lighting import WEIGHTS_DIR, load_prior
+
 from .networks import count_parameters, load_inverse, load_shadow
 from .neural_renderer import BASES, NeuralRenderer
 from .objectives import decompose_and_solve
@@ -212,7 +214,7 @@ def train_renderer(config: RendererConfig) -> dict[str, Any]:
     return {"step": config.steps, "train_seconds": seconds, "val": val}
 
 
-def validate(renderer: NeuralRenderer, inverse: nn.Module, shadow_net: nn.Module, prior, config: RendererConfig,
+def validate(renderer: NeuralRenderer, inverse: nn.Module, shadow_net: nn.Module, prior: LightingPrior, config: RendererConfig,
              panel: Path | None = None) -> dict[str, float]:
     """Held-out relighting metrics (flat: ``<method>_<metric>``) and a panel
     (source | lambertian_sh | shadownet_lambertian | proposed | path-traced target)."""

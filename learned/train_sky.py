@@ -328,6 +328,8 @@ def sky_gan_losses(model: nn.ModuleDict, image: torch.Tensor, sky: torch.Tensor,
 
 
 def build_sky_model(config: SkyTrainConfig) -> nn.ModuleDict:
+    """The freshly initialised networks of a run, seeded by ``config.seed``: ``{"g", "d"}`` for SkyGAN, ``{"seg"}``
+    for the segmenter."""
     torch.manual_seed(config.seed)
     if config.stage == "sky":
         g = SkyGenerator(config.width, config.z_dim, config.noise_channels, config.hidden)

@@ -121,6 +121,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The ``physrelight`` command: its exit status (0 done, 2 a one-line error, 130 interrupted)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     command = _chosen(argv)
     parser = build_parser(command if command in SUBCOMMANDS else None)

@@ -14,6 +14,7 @@ radiance to >= 0 after every step.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,7 +49,7 @@ def photo_loss(render: torch.Tensor, photo: torch.Tensor) -> torch.Tensor:
 
 def fit(renderer: DifferentiableRenderer, photo: torch.Tensor, steps: int = 40, lr: float = 0.05,
         fit_textures: bool = True, fit_sky: bool = True, fit_sun: bool = True, init: dict[str, torch.Tensor] | None = None,
-        seed: int = 0, progress=None) -> Fit:
+        seed: int = 0, progress: Callable[[int, float], None] | None = None) -> Fit:
     """Fit textures and lighting to a photo by differentiable path tracing.
 
     Args:

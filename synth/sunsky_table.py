@@ -96,6 +96,7 @@ def zenith_sun_colour(turbidity: float = TURBIDITY, albedo: float = GROUND_ALBED
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m synth.sunsky_table``: write the clear-sky table (see the module's docstring)."""
     p = argparse.ArgumentParser(prog="python -m synth.sunsky_table", description=__doc__.split("\n\n")[0])
     p.add_argument("-o", "--out", required=True, help="the .safetensors file to write (atomically)")
     args = p.parse_args(argv)

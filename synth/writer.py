@@ -44,6 +44,7 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any, Iterable
 
 import numpy as np
@@ -109,6 +110,7 @@ class SynthConfig:
 
 
 def scene_name(index: int) -> str:
+    """The folder name of scene ``index``: ``scene_0007``."""
     return f"scene_{index:04d}"
 
 
@@ -129,6 +131,7 @@ def parse_shard(text: str) -> tuple[int, int]:
 
 
 def shard_scenes(config: SynthConfig, shard: tuple[int, int] = (0, 1)) -> list[int]:
+    """The scene indices shard ``(i, n)`` renders: every ``n``-th from ``i``."""
     i, n = shard
     return list(range(i, config.scenes, n))
 
@@ -202,7 +205,7 @@ def scene_inputs(config: SynthConfig, index: int) -> tuple[int, Any, list[Any], 
     return seed, spec, views, lights
 
 
-def write_scene(root: Path, index: int, config: SynthConfig, on_unit=lambda: None) -> Path:
+def write_scene(root: Path, index: int, config: SynthConfig, on_unit: Callable[[], None] = lambda: None) -> Path:
     """Render scene ``index`` into ``root/scene_XXXX`` atomically; return its folder."""
     from . import mvs, photo, render
 

@@ -48,6 +48,7 @@ def _t_quantile(p_two_sided: float, dof: int) -> float:
 
 
 def run(ctx: Context) -> CheckResult:
+    """The gradient check at ``ctx.level`` (see the module's docstring)."""
     quick = ctx.level.name == "quick"
     res = CheckResult(
         key="gradients", title="7. Differentiable rendering: gradients through Mitsuba",

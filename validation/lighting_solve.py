@@ -96,6 +96,7 @@ def observable(A: np.ndarray, rtol: float = 1e-3) -> np.ndarray:
 
 
 def evaluate_view(v: BankView) -> dict[str, Any]:
+    """The lighting solve's figures on one view of the scene bank."""
     e = v.exposure
     L = v.sh(2)
     m = v.mask()
@@ -167,6 +168,7 @@ SUMMARY = (
 
 
 def run(ctx: Context) -> CheckResult:
+    """Check 4 at ``ctx.level``: the lighting solve (see the module's docstring)."""
     res = CheckResult("lighting_solve", "4. Lighting solve", SUMMARY)
     per = [evaluate_view(v) for v in bank(ctx).views()]
     table = ["| view | pixels | observable dims | exact model: image error | ridge bound | unoccluded px | "

@@ -192,6 +192,7 @@ def compare(pinned: dict[str, dict[str, Figure]], now: dict[str, dict[str, Figur
 
 
 def load(path: str | Path) -> dict[str, dict[str, Figure]]:
+    """The pinned figures in ``path`` (written by :func:`pin`), by scene and name."""
     data = io.read_json(path)
     return {s: {k: (float(v[0]), float(v[1]), str(v[2])) for k, v in figs.items()} for s, figs in data["scenes"].items()}
 
@@ -204,6 +205,8 @@ def pin(path: str | Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m validation.regression``: ``--pin`` measures and writes the pins, ``--check`` compares a fresh
+    measurement with them (exit status 1 when a figure moved)."""
     p = argparse.ArgumentParser(prog="python -m validation.regression", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--pin", metavar="JSON", help="measure and write the pins to JSON")

@@ -77,6 +77,7 @@ def oracles(v: BankView) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 
 
 def evaluate_view(v: BankView) -> dict[str, Any]:
+    """The relighting ceiling's figures on one view of the scene bank."""
     m = v.mask()
     f: dict[str, Any] = {"view": v.name, "lighting": v.lighting_name, "pixels": int(m.sum())}
     for stage, (pred, target) in oracles(v).items():
@@ -116,6 +117,7 @@ SUMMARY = (
 
 
 def run(ctx: Context) -> CheckResult:
+    """Check 5 at ``ctx.level``: the relighting ceiling (see the module's docstring)."""
     res = CheckResult("relight_ceiling", "5. Relighting ceiling", SUMMARY)
     views = bank(ctx).views()
     per = [evaluate_view(v) for v in views]

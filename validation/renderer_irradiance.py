@@ -157,6 +157,7 @@ def compare_case(shape: str, light: _lighting.Lighting, res: int, spp: int, seed
 
 
 def run(ctx: Context) -> CheckResult:
+    """The renderer's irradiance check at ``ctx.level`` (see the module's docstring)."""
     lv = ctx.level
     res = CheckResult("renderer_irradiance", "1. Renderer vs exact irradiance", SUMMARY)
     table = ["| shape | lighting | pixels | mean ratio | 4 se + q | \\|z\\|>4 share | allowed | verdict |",

@@ -59,6 +59,7 @@ def run_checks(level: Level, out_dir: str | Path, command: str, selection: Seque
 
 
 def build_json(ctx: Context, results: list[CheckResult], seconds: float) -> dict[str, Any]:
+    """``physrelight validate``'s JSON report of ``results``."""
     by_key = {r.key: r for r in results}
     report: dict[str, Any] = {
         "format": "physrelight-validation", "version": 1,
@@ -87,6 +88,7 @@ def _verdict_table(res: CheckResult, limit: int = 60) -> str:
 
 
 def build_markdown(ctx: Context, results: list[CheckResult], seconds: float) -> str:
+    """``physrelight validate``'s Markdown report of ``results``."""
     ok = all(r.passed for r in results)
     lines = [
         "# physrelight validation report", "",

@@ -158,6 +158,7 @@ SUMMARY = (
 
 
 def run(ctx: Context) -> CheckResult:
+    """The SH model's check at ``ctx.level`` (see the module's docstring)."""
     lv = ctx.level
     res = CheckResult("sh_model", "2. SH irradiance model", SUMMARY)
     bounds = {o: truncation_bounds(o) for o in ORDERS}

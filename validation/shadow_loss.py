@@ -156,6 +156,7 @@ SUMMARY = (
 
 
 def run(ctx: Context) -> CheckResult:
+    """Check 3 at ``ctx.level``: the shadow-free loss against the path tracer's ground truth (see the module's docstring)."""
     res = CheckResult("shadow_loss", "3. Shadow-free loss with ground truth", SUMMARY)
     views = bank(ctx).views()
     per: list[dict[str, Any]] = []

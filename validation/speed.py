@@ -155,6 +155,7 @@ SUMMARY = (
 
 
 def run(ctx: Context) -> CheckResult:
+    """Check 6 at ``ctx.level``: speed against accuracy (see the module's docstring)."""
     res = CheckResult("speed", "6. Speed vs accuracy", SUMMARY)
     ctx.progress("  check 6: spp sweep")
     sweeps = {ln: spp_sweep(ctx, ln) for ln in SPP_LIGHTINGS}

@@ -75,6 +75,7 @@ def shading_error(estimate: np.ndarray, truth: np.ndarray) -> float:
 
 
 def dc_luminance(coeffs: np.ndarray) -> float:
+    """The luminance of an SH lighting's DC term, ``coeffs (9, 3)``: its level."""
     return float(np.asarray(coeffs)[0] @ np.asarray(colour.LUMINANCE))
 
 

@@ -132,6 +132,7 @@ def _table(groups: list[str], summary: dict[str, Any], rows: Sequence[str], get:
 
 
 def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
+    """``bench --real``'s report (``real.md``) from its JSON, the summary chart and the panels."""
     s = report["summary"]
     groups = [g for g in GROUP_TITLES if g in s]
     m = report["machine"]

@@ -189,6 +189,7 @@ def _method_rows(report: dict[str, Any], names: Sequence[str]) -> list[str]:
 
 
 def markdown(report: dict[str, Any], chart_paths: list[tuple[str, str]]) -> str:
+    """The bench report (``report.md``) from its JSON and the charts' ``(title, path)``."""
     m, mach, v = report["methods"], report["machine"], report["verdicts"]
     names = _method_rows(report, METHODS)
     lines = ["# physrelight relighting benchmark", "",
