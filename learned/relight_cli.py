@@ -64,10 +64,10 @@ import numpy as np
 __all__ = ["DECOMPOSITION_LAYERS", "PROGRESS_PIXELS", "add_parser", "layer_with_alpha", "sun_direction"]
 
 PROGRESS_PIXELS = 1_000_000
-DECOMPOSITION_LAYERS = ("albedo", "normals", "shadow", "target_shadow", "shading")
-"""The layers of ``--layers`` that describe surfaces: written transparent on the sky (:func:`layer_with_alpha`)."""
 """A single relighting of a photo this large (pixels) or larger shows its stages on stderr unless ``--quiet``:
 about 5 s at one thread for 2000 x 1334, 40 s for 4000 x 2669 (docs/bench.md)."""
+DECOMPOSITION_LAYERS = ("albedo", "normals", "shadow", "target_shadow", "shading")
+"""The layers of ``--layers`` that describe surfaces: written transparent on the sky (:func:`layer_with_alpha`)."""
 
 
 @contextlib.contextmanager
@@ -340,7 +340,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "docs/experiments/37)")
     p.add_argument("--keep-sky", action="store_true", help="keep the photo's sky (same as --sky-source keep)")
     p.add_argument("--seed", type=int, default=0, help="SkyGAN noise seed (default: 0)")
-    p.add_argument("--layers", default=None, help="also write albedo, normals, shadows, shading (RGBA: transparent on the sky, where they "
+    p.add_argument("--layers", default=None,
+                   help="also write albedo, normals, shadows, shading (RGBA: transparent on the sky, where they "
                         "describe nothing) and the sky mask (white = sky) into this folder")
     p.add_argument("--sequence", type=positive_int, default=None, metavar="N",
                    help="sweep the azimuth over 360 degrees in N frames; write an animated GIF")
