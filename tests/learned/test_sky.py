@@ -230,7 +230,8 @@ def test_sky_gan_steps_run_with_finite_losses(tiny_dataset, tmp_path):
     assert "keep_source_sky" in figs["relight"]
 
 
-@pytest.mark.parametrize("stage,extra", [("sky", {}), ("segmentation", {}), ("segmentation", {"clouds": True})])
+@pytest.mark.parametrize("stage,extra", [("sky", {}), ("segmentation", {}), ("segmentation", {"clouds": True}),
+                                         ("segmentation", {"dusk": True})])
 def test_resume_is_bit_identical(tiny_dataset, tmp_path, stage, extra):
     straight = _config(tiny_dataset, tmp_path / "a", stage, steps=6, **extra)
     train_sky(straight)
@@ -293,3 +294,18 @@ def test_smooth_sky_keeps_a_constant_sky_and_lets_no_foreground_in(size):
         smooth_sky(img, mask[..., :-1])
     with pytest.raises(ValueError, match="sigma"):
         smooth_sky(img, mask, sigma=0.0)
+
+
+@pytest.mark.parametrize("extra", [{"clouds": True}, {"dusk": True}])
+def test_sky_augmentation_switches_change_the_run_and_nothing_else_when_off(tiny_dataset, tmp_path, extra):
+    """``--clouds`` and ``--dusk`` change what the segmenter trains on (other weights after three steps), and a run
+    with the switch off is the plain run bit for bit (the switches draw from their own streams)."""
+    plain = _config(tiny_dataset, tmp_path / "plain", "segmentation", steps=3)
+    train_sky(plain)
+    train_sky(_config(tiny_dataset, tmp_path / "on", "segmentation", steps=3, **extra))
+    off = {k: False for k in extra}
+    train_sky(_config(tiny_dataset, tmp_path / "off", "segmentation", steps=3, **off))
+    a, b, c = (load_file(str(tmp_path / n / "checkpoints" / "step_0000003.safetensors")) for n in ("plain", "on", "off"))
+    weights = [k for k in a if not k.startswith("optim.")]
+    assert any(not torch.equal(a[k], b[k]) for k in weights)
+    assert all(torch.equal(a[k], c[k]) for k in weights)
