@@ -33,6 +33,7 @@ T_SRC = "tests/learned/test_source_lighting.py"
 T_PINS = "tests/learned/test_relight_pins.py"
 T_REAL = "tests/learned/test_relight_real.py"
 T_CLI = "tests/learned/test_relight_cli.py"
+PINS_STORED = f"{T_PINS}::test_10_the_shipped_pipeline_reproduces_its_stored_output_on_a_fixed_photo"
 
 
 @dataclass(frozen=True)
@@ -55,11 +56,11 @@ MUTATIONS: tuple[Mutation, ...] = (
              (f"{T_SRC}::test_12_one_reweighting_already_pulls_the_solve_towards_the_truth",)),
     Mutation("3 relighter: auto exposure without the sky-clipping guard", "learned/relighter.py",
              "exposure_gain(exposure, relit, lin, ~sky, highlights=sky)", "exposure_gain(exposure, relit, lin, ~sky)",
-             (f"{T_PINS}::test_11_auto_exposure_meters_the_source_photo_and_spares_the_sky",)),
+             (f"{T_PINS}::test_11_auto_exposure_meters_the_source_photo_and_spares_the_sky", PINS_STORED)),
     Mutation("4 relighter: auto exposure metered on the relit image", "learned/relighter.py",
              "exposure_gain(exposure, relit, lin, ~sky, highlights=sky)",
              "exposure_gain(exposure, relit, relit, ~sky, highlights=sky)",
-             (f"{T_PINS}::test_11_auto_exposure_meters_the_source_photo_and_spares_the_sky",)),
+             (f"{T_PINS}::test_11_auto_exposure_meters_the_source_photo_and_spares_the_sky", PINS_STORED)),
     Mutation("5 relighter: the sun disc's colour in BGR order", "learned/relighter.py",
              "torch.from_numpy(_sun_rgb(d))).to(out.dtype)", "torch.from_numpy(_sun_rgb(d)[::-1].copy())).to(out.dtype)",
              (f"{T_REAL}::test_02c_a_low_suns_disc_is_red_as_its_light",)),
@@ -86,14 +87,14 @@ MUTATIONS: tuple[Mutation, ...] = (
              (f"{T_REAL}::test_06g_sky_between_towers_is_kept_when_half_as_bright_and_as_blue",)),
     Mutation("13 relight CLI: --pitch ignored", "learned/relight_cli.py",
              "pitch_deg=args.pitch,", "pitch_deg=None,",
-             (f"{T_CLI}::test_10_pitch_fov_and_source_env_reach_the_relighter",)),
+             (f"{T_CLI}::test_10_pitch_reaches_the_relighter",)),
     Mutation("14 relight CLI: EXIF focal length overrides --fov", "learned/relight_cli.py",
              "fov = args.fov if args.fov is not None else photo.fov_deg if photo.fov_deg is not None else None",
              "fov = photo.fov_deg if photo.fov_deg is not None else args.fov",
-             (f"{T_CLI}::test_10_pitch_fov_and_source_env_reach_the_relighter",)),
+             (f"{T_CLI}::test_11_fov_overrides_the_exif_focal_length_and_exif_overrides_the_default",)),
     Mutation("15 relight CLI: --source-env A --env B passes the target as the source", "learned/relight_cli.py",
              "pitch_deg=args.pitch, source=source,", "pitch_deg=args.pitch, source=target,",
-             (f"{T_CLI}::test_10_pitch_fov_and_source_env_reach_the_relighter",)),
+             (f"{T_CLI}::test_12_source_env_is_the_source_and_env_the_target",)),
 )
 
 
@@ -133,10 +134,17 @@ def check_record(m: Mutation, repo: Path) -> str:
 def run_tests(repo: Path, tests: tuple[str, ...]) -> tuple[int, list[str], str]:
     """``(pytest's exit code, the failed test ids, its output's tail)`` for ``tests`` run in ``repo``."""
     env = {**os.environ, "PYTHONPATH": str(repo), "PYTHONDONTWRITEBYTECODE": "1"}
-    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rf", "-p", "no:cacheprovider", "-x", *tests],
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rf", "-p", "no:cacheprovider", *tests],
                           cwd=repo, env=env, capture_output=True, text=True)
-    failed = [ln.split()[1].split("::")[-1] for ln in proc.stdout.splitlines() if ln.startswith("FAILED ")]
+    failed = [ln.split()[1] for ln in proc.stdout.splitlines() if ln.startswith("FAILED ")]
     return proc.returncode, failed, proc.stdout[-2000:] + proc.stderr[-2000:]
+
+
+def short(node: str) -> str:
+    """``tests/learned/test_x.py::test_07c_long_name[p]`` -> ``test_x::test_07c[p]``."""
+    file, _, test = node.partition("::")
+    m = re.match(r"(test_[0-9]+[a-z]?)[^\[]*(\[.*\])?$", test)
+    return f"{Path(file).stem}::{m.group(1) + (m.group(2) or '') if m else test}"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -176,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(tail)
             killed = code == 1 and bool(failed)  # 1: tests failed; anything else (an import error, ...) is not a kill
             result = "killed" if killed else "SURVIVED" if code == 0 else f"error (pytest exit {code})"
-            rows.append((m.name, ", ".join(re.sub(r"^(test_[0-9a-z]+)_.*", r"\1", f) for f in failed) or "-", result))
+            rows.append((m.name, ", ".join(short(f) for f in failed) or "-", result))
     width = [max(len(r[i]) for r in rows + [("mutation", "killed by", "result")]) for i in range(3)]
     for r in [("mutation", "killed by", "result"), tuple("-" * w for w in width), *rows]:
         print(" | ".join(c.ljust(w) for c, w in zip(r, width)))
