@@ -106,7 +106,8 @@ def _quantise(x: np.ndarray) -> np.ndarray:
 
 
 def generate_reference(path: Path = REFERENCE) -> None:
-    """Write the stored reference: ``make_photo()`` and the shipped pipeline's :data:`REF_LAYERS` on it (16-bit). Deliberate use only (see the module docstring)."""
+    """Write the stored reference: ``make_photo()`` and the shipped pipeline's :data:`REF_LAYERS` on it (16-bit).
+    Deliberate use only (see the module docstring)."""
     from learned import Relighter
 
     torch.set_num_threads(1)
