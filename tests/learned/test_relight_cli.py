@@ -313,3 +313,75 @@ def test_09_surface_layers_are_transparent_on_the_sky_and_keep_their_values(phot
             np.testing.assert_array_equal(a[..., -1], np.where(mask, 0, 255))
     assert modes == {"relit": "RGB", "sky_mask": "L", "albedo": "RGBA", "normals": "RGBA", "shading": "RGBA",
                      "shadow": "LA", "target_shadow": "LA"}
+
+
+# The known-source track with the photo's sky kept and the camera's exposure: what the camera settings and
+# the source lighting do shows in the relit radiance (an .exr output), compared with the API's to float noise.
+_EXACT = ["--method", "quotient", "--exposure", "keep", "--quiet", "--threads", "1"]
+_EXACT_KW = dict(method="quotient", exposure="keep", linear=True)
+
+
+def _relit_exr(src: Path, out: Path, *args: str) -> np.ndarray:
+    assert main(["relight", str(src), *args, *_EXACT, "-o", str(out)]) == 0
+    return envmap.read(out)
+
+
+def test_10_pitch_reaches_the_relighter(photo: Path, tmp_path: Path) -> None:
+    """``--pitch 15`` is ``pitch_deg=15``: the command line's relit radiance is the API's with it, and not the
+    API's with the pitch estimated from the horizon (the default), which is another picture."""
+    from learned import Relighter
+
+    r, image = Relighter.load(), io.read_image(photo)
+    got = _relit_exr(photo, tmp_path / "p.exr", "--env", str(FOREST), "--pitch", "15")
+    want = r.relight_layers(image, str(FOREST), pitch_deg=15.0, **_EXACT_KW)["relit"]
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)
+    estimated = r.relight_layers(image, str(FOREST), **_EXACT_KW)["relit"]
+    assert np.abs(got - estimated).mean() > 0.01
+
+
+def test_11_fov_overrides_the_exif_focal_length_and_exif_overrides_the_default(photo: Path, tmp_path: Path) -> None:
+    """A JPEG whose EXIF says 28 mm (equivalent: 65.0 degrees across this 76 x 52 frame): without ``--fov`` it is
+    relit at the EXIF's field of view; ``--fov 35`` (the user's word) wins over the EXIF. Each is the API's with
+    that ``fov_deg`` and not the other's."""
+    from PIL import Image
+
+    from learned import Relighter
+
+    img = (io.read_image(photo) * 255).round().astype(np.uint8)
+    jpg = tmp_path / "exif.jpg"
+    im = Image.fromarray(img)
+    exif = im.getexif()
+    exif.get_ifd(0x8769)[0xA405] = 28  # FocalLengthIn35mmFilm
+    im.save(jpg, format="JPEG", quality=95, exif=exif)
+    exif_photo = io.read_photo(jpg)
+    half = math.atan(math.hypot(36, 24) / 56)
+    exif_fov = math.degrees(2 * math.atan(math.tan(half) * 76 / math.hypot(76, 52)))
+    assert exif_photo.fov_deg == pytest.approx(exif_fov, rel=1e-9)
+    r = Relighter.load()
+    at = {fov: r.relight_layers(exif_photo.image, str(FOREST), fov_deg=fov, **_EXACT_KW)["relit"]
+          for fov in (exif_fov, 35.0)}
+    assert np.abs(at[35.0] - at[exif_fov]).mean() > 0.01
+    np.testing.assert_allclose(_relit_exr(jpg, tmp_path / "exif.exr", "--env", str(FOREST)), at[exif_fov],
+                               rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(_relit_exr(jpg, tmp_path / "fov.exr", "--env", str(FOREST), "--fov", "35"), at[35.0],
+                               rtol=1e-5, atol=1e-7)
+
+
+def test_12_source_env_is_the_source_and_env_the_target(photo: Path, tmp_path: Path) -> None:
+    """``--source-env A --env B`` relights from A to B: with the quotient, the photo's sky kept and the camera's
+    exposure, relighting to its own lighting gives the photo back exactly (test 07), so passing B as the source
+    would give the photo; A = forest.exr and B = it turned by 90 degrees give the API's ``relight(B, source=A)``,
+    far from the photo."""
+    import torch
+
+    from learned import Relighter
+    from physrelight import colour, rotations
+
+    turned = tmp_path / "turned.exr"
+    envmap.write(turned, envmap.rotate(envmap.read(FOREST), rotations.about_y(90.0)))
+    got = _relit_exr(photo, tmp_path / "ab.exr", "--source-env", str(FOREST), "--env", str(turned), "--keep-sky")
+    image = io.read_image(photo)
+    want = Relighter.load().relight_layers(image, str(turned), source=str(FOREST), new_sky=False, **_EXACT_KW)["relit"]
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)
+    photo_linear = colour.from_ldr(torch.from_numpy(image)).numpy()
+    assert np.abs(got - photo_linear).mean() > 0.01

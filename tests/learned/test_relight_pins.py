@@ -5,10 +5,12 @@ that a plausible bug would break and that the rest of the suite did not check: t
 the target the documented way, ``world_to_camera`` is applied as given (not its inverse), the
 command line honours ``--azimuth`` and steps ``--sequence`` by 360/N, its ``--layers`` are
 ``relight_layers``, the renderer sees the *target* shadow, the layers name their shadows right,
-black pixels keep the upsampled relighting, and the shipped pipeline reproduces a stored output.
+black pixels keep the upsampled relighting, the automatic exposure meters the source photo and spares
+the sky, and the shipped pipeline reproduces a stored output.
 
 The stored output (``data/relight_reference.npz``: the input photo and the pipeline's relit photo
-and shadow layers on it) is regenerated deliberately, never to make a failure go away unexamined:
+and shadow layers on it, and the relit photo at the command line's defaults, automatic exposure
+included) is regenerated deliberately, never to make a failure go away unexamined:
 when the shipped weights or the pipeline change on purpose, run
 
     .venv/bin/python -m tests.learned.test_relight_pins --regenerate
@@ -83,17 +85,19 @@ def _sun(elev: float, azim: float) -> np.ndarray:
     return sun_direction(elev, azim)
 
 
-REF_LAYERS = ("relit", "shadow", "target_shadow", "relit_quotient")
+REF_LAYERS = ("relit", "shadow", "target_shadow", "relit_quotient", "relit_auto")
 
 
 def _reference_layers(relighter, photo: np.ndarray) -> dict[str, np.ndarray]:
     """The shipped pipeline on the reference input: ``relit``, ``shadow``, ``target_shadow`` of the
     neural-renderer path (segmenter, ShadowNet, the renderer on the quotient image, the target's sky;
     the default method) and ``relit_quotient`` of the physical core alone (quotient relighting, the
-    sun shaded by its exact cosine)."""
+    sun shaded by its exact cosine), and ``relit_auto``, ``relight`` at the command line's defaults
+    (:data:`CLI_DEFAULTS`: the automatic exposure)."""
     kw = dict(world_to_camera=_world_to_camera(REF_YAW, REF_PITCH), azimuth_deg=REF_AZIMUTH, seed=0)
     out = relighter.relight_layers(photo, _sun(*REF_SUN), method="proposed", **kw)
     out["relit_quotient"] = relighter.relight_layers(photo, _sun(*REF_SUN), method="quotient", **kw)["relit"]
+    out["relit_auto"] = relighter.relight(photo, _sun(*REF_SUN), **CLI_DEFAULTS, **kw)
     return out
 
 
@@ -102,8 +106,8 @@ def _quantise(x: np.ndarray) -> np.ndarray:
 
 
 def generate_reference(path: Path = REFERENCE) -> None:
-    """Write the stored reference: ``make_photo()`` and the shipped pipeline's ``relit``, ``shadow`` and
-    ``target_shadow`` on it (16-bit). Deliberate use only (see the module docstring)."""
+    """Write the stored reference: ``make_photo()`` and the shipped pipeline's :data:`REF_LAYERS` on it (16-bit).
+    Deliberate use only (see the module docstring)."""
     from learned import Relighter
 
     torch.set_num_threads(1)
@@ -396,6 +400,42 @@ def test_09_black_pixels_take_the_upsampled_relighting_not_zero() -> None:
     assert int(dark.sum()) >= 3 * 16  # the test reaches the fallback
     torch.testing.assert_close(back[dark], up[dark])
     assert float(back[dark].min()) >= 0.04
+
+
+# ----------------------------------------------------------------------------- the exposure
+
+
+def test_11_auto_exposure_meters_the_source_photo_and_spares_the_sky(relighter, photo) -> None:
+    """``exposure="auto"`` shows the relit photo with one gain (the ``"keep"`` relit photo times it, to float
+    noise) chosen as a camera would. With the photo's own sky kept, the relit foreground takes the *source
+    photo's* foreground key (log average; the relit one is 35 % brighter, so metering the relit image would not
+    move it); under forest.exr's own bright sky that gain would put the sky's 99th percentile over white, so the
+    gain is lowered until it is white, exactly, and the foreground stays darker than the source's key."""
+    from physrelight import exposure
+    from physrelight.stats import quantile
+
+    sky = np.zeros(photo.shape[:2], bool)
+    sky[:18] = True
+    fg = torch.from_numpy(~sky)[None, None]
+    source = colour.from_ldr(torch.from_numpy(photo / 255.0).permute(2, 0, 1)[None])
+    lum = torch.tensor(colour.LUMINANCE, dtype=torch.float64)[None, :, None, None]
+    key = float(exposure.log_average(source, fg)[0])
+    for new_sky in (False, True):
+        kw = dict(sky_mask=sky, method="quotient", new_sky=new_sky, linear=True)
+        keep, auto = (torch.from_numpy(relighter.relight(photo, str(FOREST), exposure=e, **kw)).permute(2, 0, 1)[None]
+                      .double() for e in ("keep", "auto"))
+        lit = keep > 1e-4
+        gain = auto[lit] / keep[lit]
+        assert float(gain.max() - gain.min()) < 1e-5 * float(gain.mean())  # one gain for the whole picture
+        # The key the gain gives the foreground (the log average of the "keep" picture times the gain: the
+        # black window, floored at 1e-6 by log_average, would not scale with it).
+        relit_key = float(gain.mean()) * float(exposure.log_average(keep, fg)[0])
+        white = float(quantile((auto * lum).sum(1, keepdim=True)[0, 0][torch.from_numpy(sky)], 0.99))
+        if not new_sky:  # the meter sets it
+            assert float(exposure.log_average(keep, fg)[0]) > 1.3 * key
+            assert relit_key == pytest.approx(key, rel=1e-5) and white < 0.9
+        else:  # the sky's highlights set it
+            assert white == pytest.approx(1.0, rel=1e-5) and relit_key < 0.9 * key
 
 
 # ----------------------------------------------------------------------------- the stored reference

@@ -103,6 +103,25 @@ def test_02b_a_magnified_target_sky_is_smooth_and_an_overcast_one_is_the_cie_sky
     np.testing.assert_allclose(over[..., 0], over[..., 2])
 
 
+def test_02c_a_low_suns_disc_is_red_as_its_light() -> None:
+    """A ``--sun`` target 4 degrees up, seen by a level camera looking at it: the brightest pixel is the sun's
+    disc, and what the disc adds to the sky beside it has the colour of the sun's light at that elevation
+    (:func:`physrelight.sky_model.sun_colour`, red over green over blue) within 2 % per channel."""
+    from learned.relight_cli import sun_direction
+    from learned.relighter import target_sky
+    from physrelight.sky_model import sun_colour
+
+    K = panorama.view_intrinsics(40.0, 97, 65)  # odd sizes: the centre pixel's ray is the sun's direction
+    view = target_sky(sun_direction(4.0, 0.0), K, panorama.level_camera(0.0, 4.0), 65, 97).double().numpy()
+    lum = view @ np.asarray(colour.LUMINANCE)
+    r, c = np.unravel_index(int(np.argmax(lum)), lum.shape)
+    assert (r, c) == (32, 48) and lum[r, c] > 100 * lum[r, c + 12]
+    disc = view[r, c] - view[r, c + 12]  # the sky 5 degrees to the side is the sky under the disc, near enough
+    want = sun_colour(4.0)
+    assert want[0] > 1.5 * want[2] and disc[0] > disc[1] > disc[2]
+    np.testing.assert_allclose(disc / (disc @ np.asarray(colour.LUMINANCE)), want, rtol=0.02)
+
+
 def test_03_relight_paints_the_target_sky_in_the_foregrounds_units(relighter) -> None:
     """With a given sky mask and camera, the relit sky is the target's view times the same scale the
     foreground's target got and the grey-world level of the estimate (keep exposure: no gain on top;
@@ -372,6 +391,47 @@ def test_06d_a_small_noisy_photo_keeps_its_sky_and_a_textured_top_stays_refused(
         assert bool(sky.any()) == kept and (why == "") == kept
         if not kept:
             assert "textured" in why
+
+
+def _sky_over_texture(seed: int = 0, h: int = 100, w: int = 100) -> torch.Tensor:
+    """``(3, h, w)`` linear: a brown ground textured over a stop, for a smooth blue sky to be put on."""
+    g = torch.Generator().manual_seed(seed)
+    return torch.tensor([0.30, 0.25, 0.18])[:, None, None] * torch.exp(torch.rand(1, h, w, generator=g) - 0.5)
+
+
+SKY_BLUE = torch.tensor([0.40, 0.55, 0.90])[:, None, None]
+
+
+@pytest.mark.parametrize("columns, kept", [(12, True), (15, True), (8, False), (5, False)])
+def test_06f_a_sky_of_one_percent_of_the_photo_is_enough(columns: int, kept: bool) -> None:
+    """A smooth blue patch at the top of a textured 100 x 100 photo is a sky from 1 % of the photo on
+    (:data:`MIN_SKY_FRACTION`): 1.2 % and 1.5 % are kept, 0.8 % and 0.5 % refused with the share in the reason."""
+    from learned import sky_segmentation as ss
+
+    mask = torch.zeros(100, 100, dtype=torch.bool)
+    mask[:10, 20:20 + columns] = True
+    sky, why = ss.plausible_sky(mask, torch.where(mask, SKY_BLUE, _sky_over_texture()))
+    assert bool(sky.any()) == kept and (why == "") == kept, why
+    if kept:
+        assert torch.equal(sky, mask)
+    else:
+        assert why == f"the sky found covers {columns / 10:.1f} % of the photo"
+
+
+@pytest.mark.parametrize("brightness, kept", [(0.35, False), (0.45, False), (0.55, True), (0.8, True)])
+def test_06g_sky_between_towers_is_kept_when_half_as_bright_and_as_blue(brightness: float, kept: bool) -> None:
+    """A sky patch that does not touch the top (sky seen between towers) is kept when its median luminance is at
+    least half the top sky's (and it is as blue): at 0.55 and 0.8 of it, not at 0.45 or 0.35. The top sky is
+    kept either way."""
+    from learned import sky_segmentation as ss
+
+    top = torch.zeros(100, 100, dtype=torch.bool)
+    top[:20] = True
+    inner = torch.zeros_like(top)
+    inner[40:60, 40:60] = True
+    image = torch.where(inner, brightness * SKY_BLUE, torch.where(top, SKY_BLUE, _sky_over_texture()))
+    sky, why = ss.plausible_sky(top | inner, image)
+    assert why == "" and torch.equal(sky, top | inner if kept else top)
 
 
 def test_07_the_rocket_has_a_sky_and_its_towers_stay(relighter) -> None:
@@ -739,6 +799,20 @@ def test_10b_an_sh_targets_default_sky_is_skygan_smoothed(relighter) -> None:
     assert roughness(to8(smoothed)) < 0.5 * roughness(to8(own))
 
 
+def test_10c_skygans_sky_is_the_seeds(relighter) -> None:
+    """SkyGAN's sky (``sky_source="gan"``) is drawn from ``seed``: the same seed paints the same sky, bit for bit,
+    and another seed another sky (mean change over 1 % of the display range), the foreground untouched."""
+    coeffs = np.asarray(sh.project_envmap(envmap.read(FOREST), order=2))
+    photo = _outdoor(60, 90)
+    mask = np.zeros((60, 90), dtype=bool)
+    mask[:24] = True
+    kw = dict(sky_mask=mask, method="quotient", exposure="keep", sky_source="gan")
+    a, again, b = (relighter.relight(photo, coeffs, seed=seed, **kw).astype(np.float64) for seed in (0, 0, 1))
+    assert np.array_equal(a, again)
+    assert np.abs(a[mask] - b[mask]).mean() > 0.01
+    assert np.array_equal(a[~mask], b[~mask])
+
+
 def test_08c_the_command_line_relights_a_grey_scale_photo_with_a_note_and_a_warning(tmp_path, capsys) -> None:
     skimage = pytest.importorskip("skimage")
     from PIL import Image
@@ -794,6 +868,27 @@ def test_12_an_sh_targets_sun_is_the_one_its_sh_came_from(relighter) -> None:
         assert np.allclose(e_got, e_want, rtol=rtol)
     overcast = relighter.target_sun(sun_lighting(d, "overcast"))
     assert overcast is None or float(overcast.abs().max()) < 1e-3 * float(np.abs(sun_lighting(d, "overcast")).max())
+
+
+def test_12b_an_env_maps_sun_is_its_texels_over_a_quarter_of_the_peak() -> None:
+    """:func:`learned.relighter.envmap_sun` on a dim sky (0.01) with a peak texel of 100: of the texels within 3
+    degrees of the peak, those at 0.3 of it are the sun's and those at 0.2 are not; a texel at 0.3 of it 9 degrees
+    away is not; the sun keeps its texels' values and the rest is 0. An overcast map (no texel 100 times its
+    median) has no sun."""
+    from learned.relighter import envmap_sun
+
+    env = np.full((256, 512, 3), 0.01)
+    r, c = 60, 100  # 47.5 degrees up: a texel is 0.70 degrees high, 0.47 wide
+    env[r, c] = 100.0
+    env[r, c + 1] = env[r + 1, c] = 30.0  # within a degree: the sun's
+    env[r, c - 2] = env[r - 1, c] = 20.0  # within a degree, under a quarter of the peak: not
+    env[r, c + 20] = 30.0  # 9.5 degrees away: not
+    sun = envmap_sun(env)
+    want = np.zeros_like(env)
+    for rc in ((r, c), (r, c + 1), (r + 1, c)):
+        want[rc] = env[rc]
+    np.testing.assert_array_equal(sun, want)
+    assert envmap_sun(np.full((256, 512, 3), 0.5) + np.linspace(0, 1, 256)[:, None, None]) is None
 
 
 def test_13_a_rendered_sky_takes_the_grey_world_level_and_the_foreground_does_not(relighter) -> None:

@@ -263,3 +263,22 @@ def test_11_the_grey_world_level_is_what_a_light_meter_reads():
         grey_world_level(photo, n, L, fg, albedo=0.0)
     with pytest.raises(ValueError, match="must be"):
         grey_world_level(photo, n[..., :-1], L, fg)
+
+
+def test_12_one_reweighting_already_pulls_the_solve_towards_the_truth(prior):
+    """IRLS counts its solves: ``iterations=1`` is the plain solve (bit for bit the ``robust=False`` one) and
+    ``iterations=2`` is one reweighting by the plain solve's residuals. On test 07's missed pole shadow that one
+    reweighting already removes at least a quarter of the plain solve's shading error (measured 33-53 %), and
+    each further solve removes more (8 solves: below 1 %)."""
+    for seed in range(3):
+        image, albedo, n, inside, truth = lambertian_scene(prior, seed)
+        i, j = torch.meshgrid(torch.arange(RES), torch.arange(RES), indexing="ij")
+        shadowed = torch.where((j - 0.5 * i - 8).abs() < 3, 0.2 * image, image)
+        cfg = SourceLightingConfig(noise=0.05, robust=True)
+        plain = solve_source_lighting(shadowed, albedo, n, ones(), inside, prior, config=cfg.but(robust=False))
+        err = [shading_error(solve_source_lighting(shadowed, albedo, n, ones(), inside, prior,
+                                                   config=cfg.but(iterations=k))[0], truth, n, inside)
+               for k in (1, 2, 3)]
+        assert torch.equal(solve_source_lighting(shadowed, albedo, n, ones(), inside, prior,
+                                                 config=cfg.but(iterations=1)), plain)
+        assert err[1] < 0.75 * err[0] and err[2] < err[1], (seed, err)

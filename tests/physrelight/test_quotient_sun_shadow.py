@@ -106,3 +106,27 @@ def test_05_bad_shapes_raise_value_errors_naming_them() -> None:
         quotient.quotient_ratio(n, L, L, source_shadow=v_s, source_sun=sun[0])
     with pytest.raises(ValueError, match=r"target_shadow must have shape \(1, 1, 20, 24\), got \(1, 20, 24\)"):
         quotient.quotient_ratio(n, L, L, target_shadow=v_t[0], target_sun=sun)
+
+
+def test_06_with_the_exact_sun_cosine_the_shadow_dims_the_exact_sun_term_only() -> None:
+    """``sun_cosine``: photos made with ``shading(n; L - L_sun) + v * sun_shading(n; L_sun)`` are relit exactly
+    (guard 1e-9, relative error < 1e-4) to the target's; dropping either side's shadow on the sun term is off by
+    the shadowed sun share (more than 10 % of the target in the target's shadows)."""
+    n, albedo, v_s, v_t = _scene(5)
+    L_s, sun_s = _lighting((0.3, 0.7, 0.6), (2.0, 1.8, 1.5), 0.5)
+    L_t, sun_t = _lighting((-0.5, 0.4, 0.75), (1.2, 1.3, 1.6), 0.8)
+
+    def exact(L, L_sun, v):
+        return albedo * (image_model.shading(n, L - L_sun) + v * image_model.sun_shading(n, L_sun))
+
+    photo = exact(L_s, sun_s, v_s)
+    assert bool((photo > 1e-3).all())
+    want = exact(L_t, sun_t, v_t)
+    got = quotient.quotient_relight(photo, n, L_s, L_t, source_shadow=v_s, target_shadow=v_t, source_sun=sun_s,
+                                    target_sun=sun_t, guard=1e-9, sun_cosine=True)
+    torch.testing.assert_close(got, want, rtol=1e-4, atol=1e-6)
+    # What the shadow takes away in the target's shadows: the lit sun share, a measurable part of the light.
+    lit_t = exact(L_t, sun_t, torch.ones_like(v_t))
+    shade = (v_t < 0.5) & (image_model.sun_shading(n, sun_t).sum(1, keepdim=True) > 0.1)
+    assert bool(shade.any())
+    assert float(((lit_t - want) / want)[shade.expand_as(want)].mean()) > 0.1

@@ -155,6 +155,48 @@ def test_07b_auto_exposure_takes_a_sky_larger_than_torch_quantile_does() -> None
     assert math.isclose(float(exposure.exposure_gain("auto", relit, source, ~sky, highlights=sky)), 2.0, rel_tol=1e-5)
 
 
+def _grey(level: float, h: int = 10, w: int = 10) -> torch.Tensor:
+    """``(1, 3, h, w)`` a grey image of luminance ``level`` (Rec. 709 weights sum to 1)."""
+    return torch.full((1, 3, h, w), level, dtype=torch.float64)
+
+
+def test_07c_a_source_is_dark_below_two_stops_under_middle_grey() -> None:
+    """:data:`DARK_KEY` is 0.045, two stops under middle grey: a source keyed at 0.04 is dark (the relit
+    foreground goes to 0.18), one keyed at 0.05 or 0.085 is not (the relit foreground takes its key). Cases sit
+    either side of 0.045 and below 0.09, so a threshold moved by a factor of two is seen."""
+    assert math.isclose(exposure.DARK_KEY, exposure.MIDDLE_GREY / 4, rel_tol=1e-9)
+    relit = _grey(0.3)
+    for key, want in ((0.04, exposure.MIDDLE_GREY), (0.05, 0.05), (0.085, 0.085)):
+        gain = exposure.exposure_gain("auto", relit, _grey(key), None)
+        assert math.isclose(float(gain) * 0.3, want, rel_tol=1e-9), (key, float(gain) * 0.3)
+
+
+def test_07d_the_sky_guard_is_the_skys_99th_percentile() -> None:
+    """Over a dark scene (auto aims at middle grey: gain 18 on a foreground of 0.01), a sky of 1000 pixels with 3 %
+    at luminance 4 (a bright cloud: more than 1 %) holds the gain to 1/4; with only 0.5 % at 100 (the sun's disc,
+    under 1 %) the rest of the sky (0.25) sets it: 4. A 90th percentile would give 4 in the first case."""
+    h, w = 40, 25  # the sky is the top 1000 pixels
+    source = _grey(0.01, 2 * h, w)
+    sky = torch.zeros(1, 1, 2 * h, w, dtype=torch.bool)
+    sky[..., :h, :] = True
+    for n_bright, level, want in ((30, 4.0, 0.25), (5, 100.0, 4.0)):
+        relit = _grey(0.01, 2 * h, w)
+        relit[..., :h, :] = 0.25
+        relit.view(1, 3, -1)[..., :n_bright] = level  # the first pixels of the top row
+        gain = float(exposure.exposure_gain("auto", relit, source, ~sky, highlights=sky))
+        assert math.isclose(gain, want, rel_tol=1e-6), (n_bright, gain)
+        assert float(exposure.exposure_gain("auto", relit, source, ~sky)) == pytest.approx(18.0)
+
+
+def test_07e_a_black_or_blinding_relighting_keeps_a_finite_gain_of_at_most_16_stops() -> None:
+    """A relit foreground that is black (luminance floored at 1e-6) would need a gain of 0.18 / 1e-6; one at 1e6
+    would need 2e-7: both are limited to ``2**+-16``, exactly."""
+    source = _grey(0.18)
+    assert float(exposure.exposure_gain("auto", _grey(0.0), source)) == 2.0**16
+    assert float(exposure.exposure_gain("auto", _grey(1e6), source)) == 2.0**-16
+    assert float(exposure.exposure_gain("auto", _grey(0.36), source)) == pytest.approx(0.5)
+
+
 @pytest.mark.parametrize("bad", ["bright", "nan", "1e9", ""])
 def test_08_exposure_values_are_checked(bad) -> None:
     with pytest.raises(ValueError, match="exposure"):
