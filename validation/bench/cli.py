@@ -142,7 +142,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from physrelight.cli_common import positive_int
 
     p = sub.add_parser("bench", help="relighting benchmark: methods x protocols x strata, speed vs accuracy",
-                       description=DESCRIPTION + REAL_DESCRIPTION + TIMELAPSE_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=DESCRIPTION + REAL_DESCRIPTION + TIMELAPSE_DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_mutually_exclusive_group()
     g.add_argument("--quick", action="store_true", help="small run for CI, a few minutes on 2 cores (default)")
     g.add_argument("--full", action="store_true", help="the run the docs quote (data/heldout + generated scenes)")

@@ -35,7 +35,8 @@ with a ``lighting.json``, the *given* track: the same methods handed the true ta
 
 Means per sequence and overall, with 95 % hierarchical bootstrap intervals over sequences then pairs
 (:func:`physrelight.stats.hierarchical_bootstrap`), as ``bench --real`` and ``--full-resolution`` give
-them, and each estimated-track method's per-pair l1 difference to ``identity`` bootstrapped the same way. Writes ``OUT/timelapse.json`` and ``OUT/timelapse.md`` atomically.
+them, and each estimated-track method's per-pair l1 difference to ``identity`` bootstrapped the same way.
+Writes ``OUT/timelapse.json`` and ``OUT/timelapse.md`` atomically.
 """
 
 from __future__ import annotations
@@ -80,36 +81,61 @@ TRACK_TITLES = {"estimated": "estimated (the paper's setting: target lighting es
 
 @dataclass
 class TimelapseFrame:
-    """One frame of a sequence.
+    """One frame of a sequence; its pixels are read when first asked for and dropped by :meth:`release`
+    (a BigTime folder does not fit in memory at once).
 
     Attributes:
         name: file stem (``"0630"``).
         path: the frame's file.
-        photo: ``(H, W, 3)`` float32 display values in [0, 1].
-        mask: ``(H, W)`` bool, True on pixels to score, or None (no ``_mask.png``).
+        size: ``(H, W)`` as stored (upright by its EXIF orientation).
+        mask_path: its ``_mask.png`` (white = pixels to score), or None.
         truth: the frame's ground truth from ``lighting.json`` (``sh``, ``sun_sh`` ``(9, 3)`` camera frame,
             the frame's linear units), or None.
     """
 
     name: str
     path: Path
-    photo: np.ndarray
-    mask: np.ndarray | None = None
+    size: tuple[int, int]
+    mask_path: Path | None = None
     truth: dict[str, np.ndarray] | None = None
     _cache: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def photo(self) -> np.ndarray:
+        """``(H, W, 3)`` float32 display values in [0, 1]."""
+        if "photo" not in self._cache:
+            photo = io.read_photo(self.path)
+            if photo.radiance:
+                raise ValueError(f"{str(self.path)!r}: a time-lapse frame is an 8-bit photo, not radiance")
+            img = np.clip(photo.image, 0.0, 1.0).astype(np.float32)
+            if img.shape[:2] != self.size:  # the header said otherwise (a broken file)
+                raise ValueError(f"{str(self.path)!r}: decoded as {_size(img)}, its header says "
+                                 f"{self.size[1]}x{self.size[0]}")
+            self._cache["photo"] = img
+        return self._cache["photo"]
+
+    def mask(self) -> np.ndarray | None:
+        """``(H, W)`` bool, True on pixels to score, or None without a mask."""
+        if self.mask_path is None:
+            return None
+        if "mask" not in self._cache:
+            self._cache["mask"] = io.read_mask(self.mask_path)
+        return self._cache["mask"]
 
     def linear(self) -> torch.Tensor:
         """``(1, 3, H, W)`` the frame linearised with the sRGB curve (the true curve is unknown to methods)."""
         if "linear" not in self._cache:
-            t = torch.from_numpy(np.ascontiguousarray(self.photo, dtype=np.float32)).permute(2, 0, 1)[None]
-            self._cache["display"] = t
-            self._cache["linear"] = colour.from_ldr(t.clamp(0.0, 1.0))
+            self._cache["linear"] = colour.from_ldr(self.display().clamp(0.0, 1.0))
         return self._cache["linear"]
 
     def display(self) -> torch.Tensor:
         """``(1, 3, H, W)`` the frame's display values (what a relit frame is scored against)."""
-        self.linear()
+        if "display" not in self._cache:
+            self._cache["display"] = torch.from_numpy(np.ascontiguousarray(self.photo())).permute(2, 0, 1)[None]
         return self._cache["display"]
+
+    def release(self) -> None:
+        """Drop the pixels read so far."""
+        self._cache.clear()
 
 
 @dataclass
@@ -123,19 +149,43 @@ class TimelapseSequence:
     @property
     def size(self) -> tuple[int, int]:
         """``(H, W)``."""
-        return tuple(self.frames[0].photo.shape[:2])  # type: ignore[return-value]
+        return self.frames[0].size
 
     @property
     def has_truth(self) -> bool:
         return all(f.truth is not None for f in self.frames)
+
+    @property
+    def has_masks(self) -> bool:
+        return all(f.mask_path is not None for f in self.frames)
+
+    def release(self) -> None:
+        for f in self.frames:
+            f.release()
 
 
 def _size(a: np.ndarray) -> str:
     return f"{a.shape[1]}x{a.shape[0]}"
 
 
+def _stored_size(path: Path, what: str) -> tuple[int, int]:
+    """``(H, W)`` of an image file from its header, upright by its EXIF orientation (pixels not decoded)."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as im:
+            w, h = im.size
+            if im.getexif().get(0x0112, 1) in (5, 6, 7, 8):  # stored sideways: read_photo turns it upright
+                w, h = h, w
+    except (UnidentifiedImageError, OSError) as err:
+        raise ValueError(f"cannot read {str(path)!r} as {what}: {err}") from None
+    return h, w
+
+
 def read_sequence(folder: str | Path) -> TimelapseSequence:
     """One sequence folder in BigTime's layout (``folder/data/<frame>.jpg`` and optional ``<frame>_mask.png``).
+
+    Only the files' headers are read here (sizes); pixels are read when a frame is relit.
 
     Raises:
         ValueError: no ``data`` folder, fewer than 2 frames, frames of different sizes, a mask of another size
@@ -155,25 +205,25 @@ def read_sequence(folder: str | Path) -> TimelapseSequence:
     truth = _read_truth(folder)
     frames: list[TimelapseFrame] = []
     for p in files:
-        photo = io.read_photo(p)
-        if photo.radiance:
-            raise ValueError(f"{str(p)!r}: a time-lapse frame is an 8-bit photo, not radiance")
-        img = np.clip(photo.image, 0.0, 1.0).astype(np.float32)
-        if frames and img.shape != frames[0].photo.shape:
-            raise ValueError(f"{str(data)!r}: frames differ in size: {frames[0].path.name} is "
-                             f"{_size(frames[0].photo)}, {p.name} is {_size(img)}")
-        mask = None
-        mpath = data / f"{p.stem}{MASK_SUFFIX}.png"
+        size = _stored_size(p, "a frame")
+        if frames and size != frames[0].size:
+            h0, w0 = frames[0].size
+            raise ValueError(f"{str(data)!r}: frames differ in size: {frames[0].path.name} is {w0}x{h0}, "
+                             f"{p.name} is {size[1]}x{size[0]}")
+        mpath: Path | None = data / f"{p.stem}{MASK_SUFFIX}.png"
         if mpath.is_file():
-            mask = io.read_mask(mpath)
-            if mask.shape != img.shape[:2]:
-                raise ValueError(f"{str(mpath)!r}: the mask is {_size(mask)}, its frame {p.name} is {_size(img)}")
+            msize = _stored_size(mpath, "a mask")
+            if msize != size:
+                raise ValueError(f"{str(mpath)!r}: the mask is {msize[1]}x{msize[0]}, its frame {p.name} is "
+                                 f"{size[1]}x{size[0]}")
+        else:
+            mpath = None
         t = None
         if truth is not None:
             if p.stem not in truth:
                 raise ValueError(f"{str(folder / 'lighting.json')!r} has no frame {p.stem!r}")
             t = truth[p.stem]
-        frames.append(TimelapseFrame(p.stem, p, img, mask, t))
+        frames.append(TimelapseFrame(p.stem, p, size, mpath, t))
     return TimelapseSequence(folder.name, folder, frames)
 
 
@@ -277,8 +327,8 @@ class TimelapsePair:
         """``(1, 1, H, W)`` bool: both frames' masks, or neither frame's sky without masks."""
         if "fg" not in self._cache:
             fs = [self.sequence.frames[k] for k in (self.source, self.target)]
-            if all(f.mask is not None for f in fs):
-                fg = torch.from_numpy(fs[0].mask & fs[1].mask)[None, None]
+            if all(f.mask_path is not None for f in fs):
+                fg = torch.from_numpy(fs[0].mask() & fs[1].mask())[None, None]
             else:
                 fg = ~(self.skies[self.source] | self.skies[self.target])
             self._cache["fg"] = fg
@@ -312,7 +362,8 @@ class TimelapsePair:
         return colour.to_ldr(relit.clamp_min(0.0))
 
     def display_at_best_gain(self, relit: torch.Tensor) -> torch.Tensor:
-        """:meth:`display` of ``relit`` at its best single gain against the target (:func:`.protocols.display_at_best_gain`)."""
+        """:meth:`display` of ``relit`` at its best single gain against the target
+        (:func:`.protocols.display_at_best_gain`)."""
         return display_at_best_gain(relit, self.target_display(), self.target_linear(), self.foreground())
 
     def release(self) -> None:
@@ -383,54 +434,61 @@ def run_timelapse_bench(root: str | Path, out_dir: str | Path, command: str, pai
     load_before = os.getloadavg()
     try:
         methods = build_methods(relighter)
-        estimated = {m: methods[m] for m in ESTIMATED_TRACK}
-        given = {m: methods[m] for m in GIVEN_METHODS if m in methods}
-        tasks: list[tuple[str, str, Any, list[TimelapsePair]]] = []  # (track, method, callable, pairs)
-        seq_info, left_out = [], []
-        by_track: dict[str, list[TimelapsePair]] = {"estimated": [], "given": [], "self": []}
-        for s, seq in enumerate(sequences):
-            skies, lights = _sequence_inputs(relighter, seq)
-            chosen = choose_pairs(len(seq.frames), pairs, seed, s)
-            kept = []
-            for i, j in chosen:
-                p = TimelapsePair(seq, i, j, False, lights, skies)
-                if not bool(p.foreground().any()) or not informative_target(p.target_display()[0], p.foreground()[0]):
-                    left_out.append(p.key)
-                    continue
-                kept.append((i, j))
-            by_track["estimated"] += [TimelapsePair(seq, i, j, False, lights, skies) for i, j in kept]
-            if seq.has_truth:
-                by_track["given"] += [TimelapsePair(seq, i, j, True, lights, skies) for i, j in kept]
-            sources = sorted({i for i, _ in kept})
-            by_track["self"] += [TimelapsePair(seq, i, i, False, lights, skies) for i in sources]
-            seq_info.append({"name": seq.name, "folder": str(seq.folder), "frames": [f.name for f in seq.frames],
-                             "size": list(seq.size), "masks": all(f.mask is not None for f in seq.frames),
-                             "truth": seq.has_truth, "pairs": len(kept),
-                             "sky_fraction": [float(k.float().mean()) for k in skies]})
-        if not by_track["estimated"]:
-            raise ValueError(f"{str(root)!r}: no pair to score (every target frame is clipped or masked out)")
-        for name, m in estimated.items():
-            tasks.append(("estimated", name, m, by_track["estimated"]))
-            tasks.append(("self", name, m, by_track["self"]))
-        tasks.append(("reference", "identity", methods["identity"], by_track["estimated"]))
-        if by_track["given"]:
-            tasks += [("given", name, m, by_track["given"]) for name, m in given.items()]
-        total = sum(len(t[3]) for t in tasks)
-        progress(f"{len(sequences)} sequence(s), {len(by_track['estimated'])} pairs, {len(tasks)} method runs, "
-                 f"{total} relightings")
-        runs: dict[str, dict[str, MethodRun]] = {}
-        with tqdm(total=total, desc="bench --timelapse", disable=not bar, dynamic_ncols=True) as pbar:
-            for track, name, m, ps in tasks:
-                def counted(p: TimelapsePair, m: Any = m) -> torch.Tensor:
-                    out = m(p)
-                    pbar.update(1)
-                    return out
+        tasks = [(track, m, methods[m]) for track in ("estimated", "self") for m in ESTIMATED_TRACK]
+        tasks.append(("reference", "identity", methods["identity"]))
+        tasks += [("given", m, methods[m]) for m in GIVEN_METHODS if m in methods]
+        chosen = [choose_pairs(len(seq.frames), pairs, seed, s) for s, seq in enumerate(sequences)]
 
-                # chunks of 64 pairs: the scored images of a long sequence are never all in memory
-                parts = [evaluate(name, counted, ps[k:k + 64]) for k in range(0, len(ps), 64)]
-                runs.setdefault(track, {})[name] = _merge(name, parts)
-                for p in ps:
-                    p.release()
+        def relightings(seq: TimelapseSequence, ps: list[tuple[int, int]]) -> int:  # what `tasks` run on ps
+            n = {"estimated": len(ps), "reference": len(ps), "given": len(ps) if seq.has_truth else 0,
+                 "self": len({i for i, _ in ps})}
+            return sum(n[t] for t, _, _ in tasks)
+
+        total = sum(relightings(seq, c) for seq, c in zip(sequences, chosen))
+        progress(f"{len(sequences)} sequence(s), {sum(map(len, chosen))} pairs, {total} relightings")
+        parts: dict[tuple[str, str], list[MethodRun]] = {}
+        groups: dict[str, list[str]] = {"estimated": [], "given": [], "self": []}
+        seq_info, left_out = [], []
+        with tqdm(total=total, desc="bench --timelapse", disable=not bar, dynamic_ncols=True) as pbar:
+            # one sequence at a time: only its frames are in memory
+            for s, seq in enumerate(sequences):
+                skies, lights = _sequence_inputs(relighter, seq)
+                kept = []
+                for i, j in chosen[s]:
+                    p = TimelapsePair(seq, i, j, False, lights, skies)
+                    if bool(p.foreground().any()) and informative_target(p.target_display()[0], p.foreground()[0]):
+                        kept.append((i, j))
+                    else:
+                        left_out.append(p.key)
+                pbar.total -= relightings(seq, chosen[s]) - relightings(seq, kept)
+                track_pairs = {
+                    "estimated": [TimelapsePair(seq, i, j, False, lights, skies) for i, j in kept],
+                    "given": [TimelapsePair(seq, i, j, True, lights, skies) for i, j in kept] if seq.has_truth else [],
+                    "self": [TimelapsePair(seq, i, i, False, lights, skies) for i in sorted({i for i, _ in kept})]}
+                for track, ps in track_pairs.items():
+                    groups[track] += [seq.name] * len(ps)
+                for track, name, m in tasks:
+                    ps = track_pairs["estimated" if track == "reference" else track]
+
+                    def counted(p: TimelapsePair, m: Any = m) -> torch.Tensor:
+                        out = m(p)
+                        pbar.update(1)
+                        return out
+
+                    # chunks of 64 pairs: the scored images of a long sequence are never all in memory
+                    parts.setdefault((track, name), []).extend(
+                        evaluate(name, counted, ps[k:k + 64]) for k in range(0, len(ps), 64))
+                seq_info.append({"name": seq.name, "folder": str(seq.folder), "frames": [f.name for f in seq.frames],
+                                 "size": list(seq.size), "masks": seq.has_masks, "truth": seq.has_truth,
+                                 "pairs": len(kept), "sky_fraction": [float(k.float().mean()) for k in skies]})
+                seq.release()
+            pbar.refresh()
+        if not groups["estimated"]:
+            raise ValueError(f"{str(root)!r}: no pair to score (every target frame is clipped or masked out)")
+        runs: dict[str, dict[str, MethodRun]] = {}
+        for (track, name), ps in parts.items():
+            if ps:
+                runs.setdefault(track, {})[name] = _merge(name, ps)
         report = {
             "format": "physrelight-bench-timelapse", "version": 1, "command": command, "seed": seed,
             "pairs_cap": pairs, "data": str(root), "sequences": seq_info, "left_out_pairs": left_out,
@@ -440,7 +498,7 @@ def run_timelapse_bench(root: str | Path, out_dir: str | Path, command: str, pai
                         "shared": "the machine is shared with other jobs: timings are medians and indicative"},
             "date": datetime.datetime.now().isoformat(timespec="seconds"),
             "weights": "learned/weights" if weights is None else str(weights), "paper": PAPER,
-            "tracks": _summaries(runs, by_track, seed),
+            "tracks": _summaries(runs, groups, seed),
         }
         report["seconds"] = round(time.perf_counter() - t_start, 1)
         return write_timelapse_report(out_dir, report)
@@ -448,17 +506,16 @@ def run_timelapse_bench(root: str | Path, out_dir: str | Path, command: str, pai
         torch.set_num_threads(before)
 
 
-def _summaries(runs: dict[str, dict[str, MethodRun]], by_track: dict[str, list[TimelapsePair]],
+def _summaries(runs: dict[str, dict[str, MethodRun]], sequence_of: dict[str, list[str]],
                seed: int) -> dict[str, Any]:
     """Per track and method: overall means with intervals, per-sequence means, paired difference to identity."""
     out: dict[str, Any] = {}
     ident = runs["reference"]["identity"]
     for track, methods in runs.items():
-        ps = by_track["estimated" if track == "reference" else track]
-        groups = np.asarray([p.sequence.name for p in ps])
+        groups = np.asarray(sequence_of["estimated" if track == "reference" else track])
         out[track] = {}
         for name, run in methods.items():
-            entry: dict[str, Any] = {"pairs": len(ps), "mean": run.mean(), "interval": {},
+            entry: dict[str, Any] = {"pairs": len(groups), "mean": run.mean(), "interval": {},
                                      "per_sequence": {}, "seconds_per_image": _median(run.seconds),
                                      "nonfinite": run.nonfinite, "failures": run.failures,
                                      "l1_per_pair": run.values["l1"].tolist()}
