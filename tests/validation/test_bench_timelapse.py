@@ -69,25 +69,27 @@ def test_02_every_method_scores_every_pair_with_finite_paper_metrics(report: dic
     assert set(report["tracks"]["estimated"]) == {"proposed", "lambertian_sh", "shadownet_lambertian", "quotient"}
 
 
-def test_03_relighting_beats_leaving_the_frame_as_it_is(report: dict) -> None:
-    # The claim of Table 1: a frame relit to another frame's (estimated) lighting is closer to that frame than
-    # the frame itself. Could fail: a lighting estimate or relighting that moves shading the wrong way scores
-    # worse than identity. Measured on this day (2-core AMD EPYC, 2026-12-05; two runs, the same scores): l1
-    # proposed 0.0940 (given lighting 0.1161) vs identity 0.1657; proposed - identity -0.0717 [-0.1020, -0.0438].
+def test_03_relighting_to_the_estimated_lighting_beats_leaving_the_frame_as_it_is(report: dict) -> None:
+    # The claim of Table 1: a frame relit to the lighting estimated from another frame is closer to that frame
+    # than the frame itself. Could fail: an estimate or a relighting that moves the level or the shading the wrong
+    # way scores worse than identity (the given track's `proposed` does on docs/bench/timelapse.md's days).
+    # Measured on this day (2-core AMD EPYC, 2026-12-05; two runs, the same scores): l1 proposed 0.0940 vs
+    # identity 0.1657, difference -0.0717 [-0.1020, -0.0438].
     ident = report["tracks"]["reference"]["identity"]["mean"]["l1"]
-    for track in ("estimated", "given"):
-        e = report["tracks"][track]["proposed"]
-        assert e["mean"]["l1"] < ident, (track, e["mean"]["l1"], ident)
-    d = report["tracks"]["estimated"]["proposed"]["l1_minus_identity"]
+    e = report["tracks"]["estimated"]["proposed"]
+    assert e["mean"]["l1"] < ident, (e["mean"]["l1"], ident)
+    d = e["l1_minus_identity"]
     assert d["hi"] < 0.0, d  # the whole 95 % interval: not a draw of these 12 pairs
 
 
 def test_04_a_frame_relit_to_its_own_lighting_comes_back(report: dict) -> None:
-    # Control (i = j): the quotient method divides the frame's shading by itself, so only the working-resolution
-    # round trip and the ratio's filter are left; far closer than any other frame of the day is.
-    self_l1 = report["tracks"]["self"]["quotient"]["mean"]["l1"]
-    assert self_l1 < 0.02
-    assert self_l1 < 0.25 * report["tracks"]["reference"]["identity"]["mean"]["l1"]
+    # Control (i = j): relit to its own estimated lighting, a frame must score better than identity does between
+    # frames. The quotient method divides the frame's shading by itself: at 64 px there is no working-resolution
+    # round trip, so only the ratio's filter is left (measured l1 0.0003); proposed adds the renderer's gain
+    # (measured 0.0213), against identity's 0.1657 between frames.
+    ident = report["tracks"]["reference"]["identity"]["mean"]["l1"]
+    assert report["tracks"]["self"]["quotient"]["mean"]["l1"] < 0.005
+    assert report["tracks"]["self"]["proposed"]["mean"]["l1"] < 0.25 * ident
 
 
 def _frames(folder: Path, sizes: list[tuple[int, int]], mask: tuple[int, int] | None = None) -> Path:
