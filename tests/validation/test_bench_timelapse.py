@@ -136,3 +136,27 @@ def test_06_pairs_are_a_seeded_subset_and_the_flags_that_do_not_go_with_timelaps
     assert "does not go with --real" in capsys.readouterr().err
     assert main(["bench", "--timelapse", str(tmp_path / "nowhere"), "-o", str(tmp_path / "o"), "--quiet"]) == 2
     assert "is not a folder" in capsys.readouterr().err
+
+
+def test_07_the_foreground_is_both_frames_masks_else_neither_frames_sky(tmp_path) -> None:
+    import torch
+
+    from validation.bench.timelapse import TimelapsePair, read_timelapse
+
+    seq_dir = _frames(tmp_path / "seq", [(8, 6), (8, 6), (8, 6)])
+    m0 = np.zeros((6, 8), np.uint8)
+    m0[3:] = 255
+    m1 = np.zeros((6, 8), np.uint8)
+    m1[:, 4:] = 255
+    Image.fromarray(m0).save(seq_dir / "data" / "0000_mask.png")
+    Image.fromarray(m1).save(seq_dir / "data" / "0001_mask.png")
+    (seq,) = read_timelapse(seq_dir)  # DIR may itself be one sequence
+    assert [f.name for f in seq.frames] == ["0000", "0001", "0002"] and not seq.has_masks
+    skies = [torch.zeros(1, 1, 6, 8, dtype=torch.bool) for _ in range(3)]
+    skies[0][..., :2, :] = True
+    skies[2][..., :, :1] = True
+    both = TimelapsePair(seq, 0, 1, False, {}, skies).foreground()[0, 0].numpy()
+    assert np.array_equal(both, (m0 > 127) & (m1 > 127))
+    # frame 2 has no mask: neither frame's segmented sky
+    fallback = TimelapsePair(seq, 0, 2, False, {}, skies).foreground()[0, 0].numpy()
+    assert np.array_equal(fallback, ~(skies[0] | skies[2])[0, 0].numpy())
