@@ -52,7 +52,8 @@ def _timelapse(args: argparse.Namespace, progress) -> int:
 
     clash = [flag for flag, on in (("--real", args.real), ("--full-resolution", args.full_resolution),
                                    ("--data", args.data is not None), ("--hdri-dir", args.hdri_dir is not None),
-                                   ("--full", args.full)) if on]
+                                   ("--full", args.full), ("--native-data", args.native_data is not None),
+                                   ("--fov", tuple(args.fov) != (45.0, 75.0))) if on]
     if clash:
         raise ValueError(f"--timelapse reads its own frames: it does not go with {', '.join(clash)}")
     if Path(args.output).exists() and not Path(args.output).is_dir():
