@@ -36,6 +36,47 @@ your own lat-long .exr/.hdr maps. --quick: 4 crops per panorama, 2 targets; --fu
 """
 
 
+TIMELAPSE_DESCRIPTION = """
+--timelapse DIR: the paper's Table 1 protocol on time-lapse frames in BigTime's layout
+(DIR/SEQUENCE/data/FRAME.jpg, optional FRAME_mask.png, white = scored). Every frame relit to the
+lighting estimated from every other frame of its sequence, scored against that frame on the
+foreground; --pairs N relights a seeded subset of N ordered pairs per sequence (--seed). Writes
+OUT/timelapse.md and OUT/timelapse.json. A synthetic day in that layout: synth.timelapse.write_day.
+"""
+
+
+def _timelapse(args: argparse.Namespace, progress) -> int:
+    from pathlib import Path
+
+    from .timelapse import read_timelapse, run_timelapse_bench
+
+    clash = [flag for flag, on in (("--real", args.real), ("--full-resolution", args.full_resolution),
+                                   ("--data", args.data is not None), ("--hdri-dir", args.hdri_dir is not None),
+                                   ("--full", args.full), ("--native-data", args.native_data is not None),
+                                   ("--fov", tuple(args.fov) != (45.0, 75.0))) if on]
+    if clash:
+        raise ValueError(f"--timelapse reads its own frames: it does not go with {', '.join(clash)}")
+    if Path(args.output).exists() and not Path(args.output).is_dir():
+        raise ValueError(f"-o {args.output!r} is a file; the report goes into a folder")
+    read_timelapse(args.timelapse)  # a bad folder fails here, before the networks load
+    words = ["physrelight", "bench", "--timelapse", args.timelapse, "-o", args.output]
+    if args.pairs is not None:
+        words += ["--pairs", str(args.pairs)]
+    if args.seed != 0:
+        words += ["--seed", str(args.seed)]
+    if args.threads != 2:
+        words += ["--threads", str(args.threads)]
+    if args.weights is not None:
+        words += ["--weights", args.weights]
+    report = run_timelapse_bench(args.timelapse, args.output, " ".join(shlex.quote(w) for w in words),
+                                 pairs=args.pairs, seed=args.seed, threads=args.threads, weights=args.weights,
+                                 progress=progress, bar=not args.quiet)
+    n = sum(s["pairs"] for s in report["sequences"])
+    print(f"bench --timelapse done in {report['seconds']:.0f} s ({len(report['sequences'])} sequence(s), {n} pairs) "
+          f"-> {args.output}/timelapse.md")
+    return 0
+
+
 def _real(args: argparse.Namespace, command: str, progress) -> int:
     from synth.panorama_crops import crop_cameras, folder_panoramas
 
@@ -56,6 +97,10 @@ def _handler(args: argparse.Namespace) -> int:
 
     words = ["physrelight", "bench", "--full" if args.full else "--quick"]
     progress = (lambda msg: None) if args.quiet else (lambda msg: print(msg, flush=True))
+    if args.timelapse is not None:
+        return _timelapse(args, progress)
+    if args.pairs is not None:
+        raise ValueError("--pairs goes with --timelapse")
     if args.full_resolution:
         from .full_resolution import main
 
@@ -98,7 +143,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from physrelight.cli_common import positive_int
 
     p = sub.add_parser("bench", help="relighting benchmark: methods x protocols x strata, speed vs accuracy",
-                       description=DESCRIPTION + REAL_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=DESCRIPTION + REAL_DESCRIPTION + TIMELAPSE_DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_mutually_exclusive_group()
     g.add_argument("--quick", action="store_true", help="small run for CI, a few minutes on 2 cores (default)")
     g.add_argument("--full", action="store_true", help="the run the docs quote (data/heldout + generated scenes)")
@@ -124,5 +170,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "(validation/bench/full_resolution.py); writes OUT/full_resolution.md and .json")
     p.add_argument("--native-data", default=None, metavar="DIR",
                    help="with --full-resolution: the same scenes rendered at 64 px (e.g. data/heldout), scored too")
+    p.add_argument("--timelapse", default=None, metavar="DIR",
+                   help="time-lapse frames in BigTime's layout (DIR/SEQUENCE/data/*.jpg): the paper's Table 1 "
+                        "protocol (see above); writes OUT/timelapse.md and .json")
+    p.add_argument("--pairs", type=positive_int, default=None, metavar="N",
+                   help="with --timelapse: a seeded subset (--seed) of N ordered frame pairs per sequence "
+                        "(default: all)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_handler)
