@@ -27,6 +27,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from physrelight import colour, sky_mask
+from physrelight.filters import gaussian_blur
 
 from . import checkpoint as ckpt
 from .data import resize_short_side
@@ -112,17 +113,6 @@ def load_sky_segmenter(path: str | Path) -> SkySegmenter:
     return model.eval()
 
 
-def _blur(x: torch.Tensor, sigma: float) -> torch.Tensor:
-    """Separable Gaussian blur of ``(1, C, H, W)`` (5 taps, replicate border)."""
-    t = torch.arange(-2, 3, dtype=x.dtype)
-    k = torch.exp(-0.5 * (t / sigma) ** 2)
-    k = k / k.sum()
-    c = x.shape[1]
-    x = F.pad(x, (2, 2, 2, 2), mode="replicate")
-    x = F.conv2d(x, k.reshape(1, 1, 1, 5).expand(c, 1, 1, 5).contiguous(), groups=c)
-    return F.conv2d(x, k.reshape(1, 1, 5, 1).expand(c, 1, 5, 1).contiguous(), groups=c)
-
-
 WIDE_AUGMENT = {"ev": 2.0, "wb": 0.3, "gamma": (1.4, 3.0), "noise": 0.04, "dusk": 0.3, "jpeg": 0.5}
 """The wider camera of ``photometric_augment(..., wide=True)``: exposure +-2 EV, white balance
 ``exp(U(-0.3, 0.3))``, response exponent ``1 / U(1.4, 3.0)``, noise up to 0.04, a dusk tint on 30 %
@@ -204,7 +194,7 @@ def photometric_augment(image: torch.Tensor, generator: torch.Generator, wide: b
         sigma = float(u(0.0, noise_r))
         y = y + sigma * torch.randn(y.shape, generator=g, dtype=torch.float64)
         if float(u(0, 1)) < 0.5:
-            y = _blur(y, float(u(0.3, 1.0)))
+            y = gaussian_blur(y, float(u(0.3, 1.0)), radius=2)  # 5 taps at every sigma, as trained
         if wide and float(u(0, 1)) < WIDE_AUGMENT["jpeg"]:
             y = jpeg_like(y, float(u(0.01, 0.04)))
         y = torch.round(y.clamp(0.0, 1.0) * 255.0) / 255.0
