@@ -161,3 +161,16 @@ def test_05_the_sky_masks_classical_processing_lives_in_the_core_once() -> None:
             assert set(SKY_MASK_NAMES) <= defined and set(SKY_MASK_NAMES) <= exported
         else:
             assert not (defined | exported) & set(SKY_MASK_NAMES), f"{name} defines or exports {SKY_MASK_NAMES}"
+
+
+def test_06_one_gaussian_blur() -> None:
+    """The segmenter's camera softening, SkyGAN's smoothed sky and SSIM's window are one function,
+    :func:`physrelight.filters.gaussian_blur` (issue 41): no other module defines a blur or a Gaussian kernel."""
+    found = {}
+    for name, (path, _) in _modules().items():
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.FunctionDef) and ("blur" in node.name.lower()
+                                                      or "gaussian_1d" in node.name or "gaussian_filter" in node.name
+                                                      or "gaussian_kernel" in node.name):
+                found.setdefault(name, []).append(node.name)
+    assert found == {"physrelight.filters": ["gaussian_kernel1d", "gaussian_blur"]}, found
