@@ -321,6 +321,17 @@ def test_07c_a_multi_scale_mask_is_the_mean_of_its_sizes_probabilities(relighter
             sky_mask_full_resolution(relighter.sky_segmenter, lin, res=bad)
 
 
+@pytest.mark.parametrize("h, w", [(10, 2000), (40, 640)])
+def test_07d_a_long_thin_photos_sky_mask_finishes(relighter, h, w) -> None:
+    """A 2000 x 10 and a 640 x 40 photo through the whole sky mask (segmenter at 128 px, plausibility, guided
+    upsampling, band, growth): their working images are 128 x 25600 and 128 x 2048, and the component labels'
+    max-pool propagation (up to H * W passes) ran for minutes on the first and 43 s on the second; the one-pass
+    labelling (:func:`physrelight.sky_mask.label_components`) returns. No time is asserted, only the mask."""
+    lin = colour.from_ldr(torch.from_numpy(_outdoor(h, w)).permute(2, 0, 1)[None].float() / 255)
+    sky, why = relighter.photo_sky(lin)
+    assert sky.shape == (1, 1, h, w) and sky.dtype == torch.bool and isinstance(why, str)
+
+
 def _jpeg_with_exif(path: Path, img: np.ndarray, orientation: int, f35: int | None = None) -> None:
     from PIL import Image
 

@@ -14,7 +14,8 @@ import torch.nn.functional as F
 from physrelight import colour
 from physrelight.guided_filter import box_filter
 from physrelight.sky_mask import (VARIANCE_FLOOR, _boundary_band, _dilate, _local_gaussian_nll, _local_gaussian_nll_at,
-                                   _local_mean, _roughness, grow_sky_by_colour, log_noise_sigma, refine_sky_boundary,
+                                   _local_mean, _roughness, grow_sky_by_colour, label_components, log_noise_sigma,
+                                   refine_sky_boundary,
                                    resized_noise_roughness, sky_roughness)
 
 
@@ -264,3 +265,58 @@ def test_09_the_noise_roughness_after_resizing_is_the_resized_noises(size, worki
     elif size[0] % working[0] == 0 and size[0] // working[0] == size[1] // working[1]:
         f = size[0] // working[0]
         assert abs(gain / (8.0 / 9.0 / f ** 2) - 1.0) < 0.05
+
+
+def _labels_by_max_pooling(mask: torch.Tensor) -> torch.Tensor:
+    """The labelling :func:`label_components` replaced, kept as the reference: every mask pixel starts with its flat
+    index + 1 and takes the largest label of its 3 x 3 neighbourhood on the mask until nothing changes (up to
+    ``H * W`` passes)."""
+    h, w = mask.shape
+    lab = torch.where(mask, torch.arange(1, h * w + 1, dtype=torch.float64).reshape(h, w),
+                      torch.zeros(h, w, dtype=torch.float64))
+    m = mask.to(torch.float64)
+    for _ in range(h * w):
+        new = F.max_pool2d(lab[None, None], 3, stride=1, padding=1)[0, 0] * m
+        if torch.equal(new, lab):
+            break
+        lab = new
+    return lab.to(torch.int64)
+
+
+def _diagonal_only() -> torch.Tensor:
+    """Components joined through corners only: a staircase of single pixels, a V and a checkerboard patch."""
+    m = torch.zeros(12, 15, dtype=torch.bool)
+    for i in range(10):
+        m[i + 1, i + 2] = True  # a staircase of single pixels
+    m[0, 12] = m[1, 13] = m[0, 14] = True  # a V
+    m[8:12:2, 0:6:2] = True  # a checkerboard patch: every pixel touches the next through a corner
+    m[9:12:2, 1:6:2] = True
+    return m
+
+
+@pytest.mark.parametrize("shape, density", [((1, 1), 1.0), ((1, 40), 0.6), ((40, 1), 0.6), ((2, 2), 0.5),
+                                            ((17, 23), 0.4), ((33, 9), 0.55), ((64, 96), 0.5), ((48, 80), 0.62)])
+def test_10_the_one_pass_labels_are_the_max_pooled_ones(shape, density) -> None:
+    """:func:`label_components` (``scipy.ndimage.label``, 8-connected, then each component named by its largest flat
+    index + 1) gives exactly the labels of the max-label propagation it replaced: on random masks (several seeds, at
+    the percolation threshold of 8-connectivity, where components are long and branched), single rows and columns
+    and components joined through corners only."""
+    g = torch.Generator().manual_seed(shape[0] * 1000 + shape[1])
+    masks = [torch.rand(*shape, generator=g) < density for _ in range(3)]
+    masks += [torch.zeros(shape, dtype=torch.bool), torch.ones(shape, dtype=torch.bool)]
+    for m in masks:
+        got = label_components(m)
+        assert got.dtype == torch.int64 and got.shape == m.shape
+        assert torch.equal(got, _labels_by_max_pooling(m))
+    diag = _diagonal_only()
+    got = label_components(diag)
+    assert torch.equal(got, _labels_by_max_pooling(diag))
+    assert got[1, 2] == got[10, 11] == 10 * 15 + 11 + 1  # the staircase is one component, named by its last pixel
+    assert got[0, 12] == got[1, 13] == got[0, 14] == 1 * 15 + 13 + 1 and got[8, 0] == got[11, 5] == 11 * 15 + 5 + 1
+    assert len(torch.unique(got)) == 4  # the three components and the background
+
+
+def test_11_labelling_refuses_a_mask_that_is_not_a_2d_bool_tensor() -> None:
+    for bad in (torch.zeros(1, 4, 4, dtype=torch.bool), torch.zeros(4, 4), torch.zeros(4, 4).numpy() > 0):
+        with pytest.raises(ValueError, match="mask must be a bool tensor of shape"):
+            label_components(bad)
