@@ -1,8 +1,9 @@
 """Specification of the real-photo relight path (issue 25): the layers have no band along the top,
-the target's own sky is the crop renderer's view, thin structures against the sky are decided at
-full resolution, the pitch comes from the horizon, a photo without a plausible sky gets a warning
-and no painted sky, EXIF orientation and focal length are honoured, and every refused input gives
-one line, exit status 2 and no file."""
+the target's own sky is the crop renderer's view, the pitch comes from the horizon, a photo without a
+plausible sky gets a warning and no painted sky, a long thin photo's sky mask finishes, EXIF orientation
+and focal length are honoured, and every refused input gives one line, exit status 2 and no file. How
+thin structures against the sky are decided at full resolution (the mask's classical processing) is
+specified in tests/physrelight/test_sky_mask.py."""
 
 from __future__ import annotations
 
