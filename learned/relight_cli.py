@@ -301,9 +301,9 @@ def _exposure(text: str) -> str | float:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``relight``."""
     from physrelight.cli_common import number_in, positive_int, positive_number
+    from physrelight.sky_mask import GROW_REACH
 
     from .relighter import RELIGHT_METHODS, SKY_SOURCES, SKY_TYPES
-    from .sky_segmentation import GROW_REACH
 
     p = sub.add_parser("relight", help="relight one outdoor photo to a new lighting (shipped weights)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -33,13 +33,13 @@ import torch
 from physrelight import colour, image_model, sh, stats
 from physrelight.lighting_prior import LightingPrior
 from physrelight.quotient import SMOOTH_RADIUS, quotient_relight
+from physrelight.sky_mask import GROW_REACH
 from physrelight.sky_model import FIT_GLOW_EXPONENT, horizon_clamped, sun_disc
 
 from . import checkpoint as ckpt
 from .lighting import WEIGHTS_DIR, load_prior
 from .networks import InverseNet, ShadowNet, repair_top_rows
 from .objectives import decompose_and_solve
-from .sky_segmentation import GROW_REACH
 from .source_lighting import SourceLightingConfig, grey_world_level, solve_source_lighting
 
 DEFAULT_METHOD = "proposed"
@@ -755,7 +755,7 @@ class Relighter:
             if why:
                 warnings.warn(f"no sky relit: {why}; relighting the foreground only", UserWarning, stacklevel=3)
             elif sky_mask is None and self.sky_segmenter is not None and bool(reuse["sky"].any()):
-                from .sky_segmentation import is_monochrome
+                from physrelight.sky_mask import is_monochrome
 
                 if is_monochrome(lin):
                     warnings.warn("the photo has no colour: the sky mask cannot tell the sky by its colour and may "

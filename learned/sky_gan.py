@@ -36,6 +36,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from physrelight import colour
+from physrelight.filters import gaussian_blur
 
 from . import checkpoint as ckpt
 
@@ -246,17 +247,6 @@ blurring them away scored higher than the blotches (10.09 against 9.68 dB)."""
 _SMOOTH_FULL_SIZE = 256
 
 
-def _gaussian_blur(x: torch.Tensor, sigma: float) -> torch.Tensor:
-    """Separable Gaussian blur of ``x (B, C, H, W)``, radius ``3 sigma`` (replicate border)."""
-    r = max(1, int(3 * sigma))
-    t = torch.arange(-r, r + 1, dtype=x.dtype)
-    g = torch.exp(-0.5 * (t / sigma) ** 2)
-    g = g / g.sum()
-    c = x.shape[1]
-    x = F.conv2d(F.pad(x, (r, r, 0, 0), mode="replicate"), g.view(1, 1, 1, -1).expand(c, 1, 1, -1), groups=c)
-    return F.conv2d(F.pad(x, (0, 0, r, r), mode="replicate"), g.view(1, 1, -1, 1).expand(c, 1, -1, 1), groups=c)
-
-
 def smooth_sky(sky_image: torch.Tensor, sky: torch.Tensor, sigma: float = SMOOTH_SIGMA) -> torch.Tensor:
     """``sky_image (B, 3, H, W)`` blurred within the mask ``sky (B, 1, H, W)`` bool by a Gaussian of
     ``sigma`` times the short side (normalised convolution: foreground pixels neither give nor take).
@@ -279,7 +269,7 @@ def smooth_sky(sky_image: torch.Tensor, sky: torch.Tensor, sigma: float = SMOOTH
         small = (max(1, round(size[0] * k)), max(1, round(size[1] * k)))
         num, den = F.interpolate(num, size=small, mode="area"), F.interpolate(den, size=small, mode="area")
     s = float(sigma) * min(num.shape[-2:])
-    out = _gaussian_blur(num, s) / _gaussian_blur(den, s).clamp_min(1e-6)
+    out = gaussian_blur(num, s) / gaussian_blur(den, s).clamp_min(1e-6)
     if k < 1:
         out = F.interpolate(out, size=size, mode="bilinear", align_corners=False)
     return out

@@ -36,6 +36,7 @@ import torch.nn.functional as F
 
 from physrelight._checks import Array, Restore, check_finite, check_image, to_tensor
 from physrelight.colour import _check_channels, _rgb_to_lab, _srgb_to_linear
+from physrelight.filters import gaussian_blur
 
 __all__ = [
     "l1",
@@ -258,20 +259,6 @@ def best_gain(pred: Array, target: Array, mask: Array | None = None) -> Any:
 # ----------------------------------------------------------------------------- SSIM
 
 
-def _gaussian_1d(dtype: torch.dtype, device: torch.device) -> torch.Tensor:
-    x = torch.arange(-_SSIM_RADIUS, _SSIM_RADIUS + 1, dtype=torch.float64)
-    w = torch.exp(-0.5 * (x / _SSIM_SIGMA) ** 2)
-    return (w / w.sum()).to(dtype=dtype, device=device)
-
-
-def _gaussian_filter_valid(z: torch.Tensor) -> torch.Tensor:
-    """Separable 11x11 Gaussian filter without padding: ``(B, K, H, W) -> (B, K, H-10, W-10)``."""
-    k = z.shape[1]
-    w = _gaussian_1d(z.dtype, z.device)
-    z = F.conv2d(z, w.view(1, 1, -1, 1).repeat(k, 1, 1, 1), groups=k)
-    return F.conv2d(z, w.view(1, 1, 1, -1).repeat(k, 1, 1, 1), groups=k)
-
-
 def _pad_symmetric(x: torch.Tensor, r: int) -> torch.Tensor:
     """Half-sample symmetric padding (``d c b a | a b c d``, scipy's ``mode='reflect'``)."""
     for axis in (-2, -1):
@@ -288,8 +275,9 @@ def _ssim_map(p: torch.Tensor, t: torch.Tensor, data_range: float, padding: str 
     if padding == "symmetric":
         p, t = _pad_symmetric(p, _SSIM_RADIUS), _pad_symmetric(t, _SSIM_RADIUS)
     c = p.shape[1]
-    # one grouped convolution for the five local moments
-    mu_p, mu_t, e_pp, e_tt, e_pt = _gaussian_filter_valid(torch.cat([p, t, p * p, t * t, p * t], 1)).split(c, 1)
+    # one blur (grouped convolutions) for the five local moments
+    z = torch.cat([p, t, p * p, t * t, p * t], 1)
+    mu_p, mu_t, e_pp, e_tt, e_pt = gaussian_blur(z, _SSIM_SIGMA, _SSIM_RADIUS, "valid").split(c, 1)
     var_p = e_pp - mu_p * mu_p  # population (not sample) covariances, as Wang et al.
     var_t = e_tt - mu_t * mu_t
     cov = e_pt - mu_p * mu_t

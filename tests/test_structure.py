@@ -131,3 +131,46 @@ def test_04_layers_point_down(lower: str, upper: str) -> None:
     bad = {m: sorted(d for d in deps if d.split(".")[0] == upper)
            for m, deps in graph.items() if m.split(".")[0] == lower}
     assert not {m: d for m, d in bad.items() if d}
+
+
+SKY_MASK_CORE = "physrelight.sky_mask"
+SKY_MASK_NAMES = ("display_noise_sigma", "grow_sky_by_colour", "is_monochrome", "label_components", "log_noise_sigma",
+                  "plausible_sky", "refine_sky_boundary", "resized_noise_roughness", "sky_colour_model", "sky_roughness")
+
+
+def _defined_and_exported(path: Path) -> tuple[set[str], set[str]]:
+    """The top-level functions and classes a module defines, and the names of its ``__all__``."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    defined = {n.name for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+    exported: set[str] = set()
+    for n in tree.body:
+        if isinstance(n, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__" for t in n.targets):
+            exported = {e.value for e in n.value.elts if isinstance(e, ast.Constant)}
+    return defined, exported
+
+
+def test_05_the_sky_masks_classical_processing_lives_in_the_core_once() -> None:
+    """The plausibility test, the boundary by colour, the growth by colour and the components are image processing
+    (issue 41): defined in :mod:`physrelight.sky_mask` only, which imports nothing but the core, and not re-exported
+    by the segmenter's module."""
+    modules = _modules()
+    assert not {d for d in import_graph()[SKY_MASK_CORE] if d.split(".")[0] != "physrelight"}
+    for name, (path, _) in modules.items():
+        defined, exported = _defined_and_exported(path)
+        if name == SKY_MASK_CORE:
+            assert set(SKY_MASK_NAMES) <= defined and set(SKY_MASK_NAMES) <= exported
+        else:
+            assert not (defined | exported) & set(SKY_MASK_NAMES), f"{name} defines or exports {SKY_MASK_NAMES}"
+
+
+def test_06_one_gaussian_blur() -> None:
+    """The segmenter's camera softening, SkyGAN's smoothed sky and SSIM's window are one function,
+    :func:`physrelight.filters.gaussian_blur` (issue 41): no other module defines a blur or a Gaussian kernel."""
+    found = {}
+    for name, (path, _) in _modules().items():
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.FunctionDef) and ("blur" in node.name.lower()
+                                                      or "gaussian_1d" in node.name or "gaussian_filter" in node.name
+                                                      or "gaussian_kernel" in node.name):
+                found.setdefault(name, []).append(node.name)
+    assert found == {"physrelight.filters": ["gaussian_kernel1d", "gaussian_blur"]}, found

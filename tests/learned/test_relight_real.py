@@ -1,8 +1,9 @@
 """Specification of the real-photo relight path (issue 25): the layers have no band along the top,
-the target's own sky is the crop renderer's view, thin structures against the sky are decided at
-full resolution, the pitch comes from the horizon, a photo without a plausible sky gets a warning
-and no painted sky, EXIF orientation and focal length are honoured, and every refused input gives
-one line, exit status 2 and no file."""
+the target's own sky is the crop renderer's view, the pitch comes from the horizon, a photo without a
+plausible sky gets a warning and no painted sky, a long thin photo's sky mask finishes, EXIF orientation
+and focal length are honoured, and every refused input gives one line, exit status 2 and no file. How
+thin structures against the sky are decided at full resolution (the mask's classical processing) is
+specified in tests/physrelight/test_sky_mask.py."""
 
 from __future__ import annotations
 
@@ -13,7 +14,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-import torch.nn.functional as F
 
 from physrelight import colour, envmap, io, panorama, sh
 
@@ -148,56 +148,6 @@ def test_03_relight_paints_the_target_sky_in_the_foregrounds_units(relighter) ->
     np.testing.assert_allclose(out[sky], want[sky], atol=1e-5)
 
 
-def test_04_a_lattice_against_the_sky_is_decided_at_full_resolution() -> None:
-    """A 2-px dark pole in a smooth sky: the working-resolution mask blurs it away, the colour
-    refinement of the band round the boundary gives it back to the foreground to the pixel."""
-    from learned.sky_segmentation import refine_sky_boundary
-
-    H, W = 64, 96
-    img = torch.ones(1, 3, H, W) * torch.tensor([0.3, 0.5, 0.9])[None, :, None, None]
-    img[..., 40:, :] = torch.tensor([0.2, 0.25, 0.1])[None, :, None, None]  # ground
-    img[..., :40, 50:52] = 0.02  # the pole
-    coarse = torch.zeros(1, 1, H, W, dtype=torch.bool)
-    coarse[..., :36, :] = True
-    coarse[..., :36, 46:56] = False  # the working mask: a fat blob round the pole, the horizon 4 px high
-    got = refine_sky_boundary(coarse, img, band=6)[0, 0]
-    truth = torch.zeros(H, W, dtype=torch.bool)
-    truth[:40] = True
-    truth[:40, 50:52] = False
-    assert bool((got == truth).all())
-
-
-@pytest.mark.parametrize("min_share, kept", [(None, True), (0.0, False)])
-def test_04f_an_object_narrower_than_the_band_is_not_decided_by_a_few_strangers(min_share, kept) -> None:
-    """A cream pole 10 px wide against a blue sky, the band 8 px: every pole pixel is in the band and the pole
-    has no sure pixels of its own. The only sure foreground within the window is the small core of a dark
-    box beside it; the photo's foreground as a whole (a varied town) has the pole's colours in its spread.
-    With the default :data:`MIN_SURE_SHARE` that starved local Gaussian gives way to the whole foreground's and
-    the pole stays; with 0 (before study 44) the box's narrow Gaussian puts the pole thousands of nats away and
-    the band hands the pole to the sky (what happened to rocket.jpg's body)."""
-    from learned.sky_segmentation import refine_sky_boundary
-
-    H, W = 128, 128
-    g = torch.Generator().manual_seed(0)
-    img = torch.ones(1, 3, H, W) * torch.tensor([0.05, 0.1, 0.3])[None, :, None, None]
-    img = img * torch.linspace(0.8, 1.2, H)[None, None, :, None]  # a smooth sky gradient
-    img[..., 100:, :] = torch.exp(torch.empty(1, 3, H - 100, W).uniform_(-2.5, 0.0, generator=g))  # the town
-    img[..., 30:60, 58:82] = 0.02  # a dark box in the sky, 8 px of sky from the pole
-    img[..., 20:100, 40:50] = torch.tensor([0.6, 0.55, 0.45])[None, :, None, None]  # the pole, on the ground
-    truth = torch.zeros(1, 1, H, W, dtype=torch.bool)
-    truth[..., :100, :] = True
-    truth[..., 30:60, 58:82] = False
-    truth[..., 20:100, 40:50] = False
-    got = refine_sky_boundary(truth, img, band=8, min_share=min_share)[0, 0]
-    pole = torch.zeros(H, W, dtype=torch.bool)
-    pole[20:100, 40:50] = True
-    if kept:
-        assert not bool(got[pole].any())
-        assert bool(got[:100][truth[0, 0, :100]].all())  # and the sky stays sky
-    else:
-        assert float(got[pole].float().mean()) > 0.2
-
-
 def test_05_the_pitch_comes_from_where_the_sky_comes_down_to() -> None:
     from learned.relighter import estimate_pitch
 
@@ -264,7 +214,7 @@ def test_06b_a_black_and_white_photo_gets_a_warning_about_its_sky_mask(relighter
     colour to go by it also takes the white tower and part of the camcorder; relight says so. The same photo
     with a slight tint (a sepia print), and every colour photo of the other tests, have colour."""
     skimage = pytest.importorskip("skimage")
-    from learned.sky_segmentation import is_monochrome
+    from physrelight.sky_mask import is_monochrome
 
     grey = np.repeat(skimage.data.camera()[..., None], 3, axis=-1)
     with pytest.warns(UserWarning, match="the photo has no colour"):
@@ -288,62 +238,6 @@ def _with_display_noise(photo: np.ndarray, sigma: float, seed: int) -> np.ndarra
     return (np.clip(noisy, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
 
 
-@pytest.mark.parametrize("display", [0.15, 0.5, 0.9])
-def test_06c_the_smoothness_tests_roughness_takes_the_noise_out(display) -> None:
-    """On a flat patch of display value ``display`` with white display noise (sd 0.02), the 3 x 3 roughness of log
-    luminance is the noise, brought to log luminance by the display curve's slope there (a z-test of its mean
-    square against 8/9 of the predicted variance), and :func:`sky_roughness` takes it out: its median is 0. A
-    textured patch beside a noiseless flat one keeps its roughness."""
-    from learned.sky_segmentation import _roughness, log_noise_sigma, sky_roughness
-
-    g = torch.Generator().manual_seed(int(display * 100))
-    d = (display + 0.02 * torch.randn(96, 96, generator=g)).clamp(0, 1)
-    lum = colour.from_ldr(d)
-    s = log_noise_sigma(lum)
-    y = float(colour.from_ldr(torch.tensor(display)))
-    step = colour.to_ldr(torch.tensor(y * 1.001)) - colour.to_ldr(torch.tensor(y / 1.001))
-    dlog_ddisplay = 2 * math.log(1.001) / float(step)
-    sigma_log = 0.02 * dlog_ddisplay  # the display noise in log luminance at this brightness
-    assert abs(float(s.median()) / sigma_log - 1.0) < 0.15
-    r2 = _roughness(lum)[1:-1, 1:-1] ** 2  # interior windows: 9 pixels each
-    expected = 8.0 / 9.0 * sigma_log ** 2
-    # windows overlap: use every third one in each direction (independent), about 1000 of them
-    sample = r2[::3, ::3].flatten().double()
-    z = (float(sample.mean()) - expected) / (float(sample.std()) / math.sqrt(sample.numel()))
-    assert abs(z) < 4.0
-    assert float(sky_roughness(lum).median()) == 0.0
-    assert float(sky_roughness(lum, noise_aware=False).median()) > 0.5 * math.sqrt(expected)
-    tex = torch.ones(96, 96) * 0.5
-    tex[:, 48:] = torch.exp(torch.empty(96, 48).uniform_(-1.0, 1.0, generator=g)) * 0.2
-    assert torch.allclose(sky_roughness(tex)[:, 50:], _roughness(tex)[:, 50:])
-
-
-@pytest.mark.parametrize("size, working", [((96, 96), (96, 96)), ((96, 128), (24, 32)), ((120, 180), (40, 60)),
-                                           ((80, 120), (128, 192)), ((100, 150), (128, 192))])
-def test_06e_the_noise_roughness_after_resizing_is_the_resized_noises(size, working) -> None:
-    """:func:`resized_noise_roughness` against brute force: fresh white noise (another seed, several draws) resized
-    as :func:`learned.data.resize_short_side` does, its mean 3 x 3 variance within 5 %. Unresized it is 8/9, and
-    area-shrunk by an integer factor f it is 8/9 / f^2 (independent means of f^2 samples), exactly as stated."""
-    from learned.data import resize_short_side
-    from learned.sky_segmentation import resized_noise_roughness
-    from physrelight.guided_filter import box_filter
-
-    gain = resized_noise_roughness(size, working)
-    g = torch.Generator().manual_seed(11)
-    draws = []
-    for _ in range(8):
-        y = resize_short_side(torch.randn(1, 1, *size, generator=g, dtype=torch.float64), min(working))
-        assert tuple(y.shape[-2:]) == working
-        m = box_filter(y, 1)
-        draws.append(float((box_filter(y * y, 1) - m * m)[0, 0, 1:-1, 1:-1].mean()))
-    assert abs(gain / float(np.mean(draws)) - 1.0) < 0.05
-    if size == working:
-        assert gain == 8.0 / 9.0
-    elif size[0] % working[0] == 0 and size[0] // working[0] == size[1] // working[1]:
-        f = size[0] // working[0]
-        assert abs(gain / (8.0 / 9.0 / f ** 2) - 1.0) < 0.05
-
-
 def test_06d_a_small_noisy_photo_keeps_its_sky_and_a_textured_top_stays_refused(relighter) -> None:
     """rocket.jpg at 160 and 120 px with noise of 2 % of white: at the 128-px working size the noise is not averaged
     away, and with the plain roughness its dark sky was as rough as its foreground and refused (study 50). With the
@@ -352,21 +246,21 @@ def test_06d_a_small_noisy_photo_keeps_its_sky_and_a_textured_top_stays_refused(
     skimage = pytest.importorskip("skimage")
     from PIL import Image
 
-    import learned.sky_segmentation as ss
+    from physrelight import sky_mask as sm
 
     def noisy_rocket(width: int) -> torch.Tensor:
         small = np.asarray(Image.fromarray(skimage.data.rocket()).resize((width, round(width * 427 / 640)), Image.LANCZOS))
         return colour.from_ldr(torch.from_numpy(_with_display_noise(small, 0.02, 0)).permute(2, 0, 1)[None].float() / 255)
 
     def mask_with(lin: torch.Tensor, **switches: bool) -> tuple[torch.Tensor, str]:
-        saved = {k: getattr(ss, k) for k in switches}
+        saved = {k: getattr(sm, k) for k in switches}
         try:
             for k, v in switches.items():
-                setattr(ss, k, v)
+                setattr(sm, k, v)
             return relighter.photo_sky(lin)
         finally:
             for k, v in saved.items():
-                setattr(ss, k, v)
+                setattr(sm, k, v)
 
     for width in (160, 120):
         sky, why = relighter.photo_sky(noisy_rocket(width))
@@ -387,7 +281,7 @@ def test_06d_a_small_noisy_photo_keeps_its_sky_and_a_textured_top_stays_refused(
         wall = np.array([0.45, 0.55, 0.75]) * np.exp(texture * rng.uniform(-1, 1, (h, w, 1)))
         photo = (np.where(top[..., None], wall, ground).clip(0, 1) * 255 + 0.5).astype(np.uint8)
         lin = colour.from_ldr(torch.from_numpy(_with_display_noise(photo, 0.02, 4)).permute(2, 0, 1).float() / 255)
-        sky, why = ss.plausible_sky(torch.from_numpy(top), lin)
+        sky, why = sm.plausible_sky(torch.from_numpy(top), lin)
         assert bool(sky.any()) == kept and (why == "") == kept
         if not kept:
             assert "textured" in why
@@ -454,7 +348,7 @@ def test_07b_the_relighters_sky_grow_reaches_the_mask(relighter) -> None:
     the mask without growth (``sky_grow = 0``)."""
     skimage = pytest.importorskip("skimage")
     from learned.relighter import Relighter
-    from learned.sky_segmentation import GROW_REACH
+    from physrelight.sky_mask import GROW_REACH
 
     assert relighter.sky_grow == GROW_REACH == 0.1
     lin = colour.from_ldr(torch.from_numpy(skimage.data.rocket()).permute(2, 0, 1)[None].float() / 255)
@@ -486,6 +380,17 @@ def test_07c_a_multi_scale_mask_is_the_mean_of_its_sizes_probabilities(relighter
     for bad in ((), (64, None), (64, 4), 4.0):
         with pytest.raises(ValueError, match="res must be"):
             sky_mask_full_resolution(relighter.sky_segmenter, lin, res=bad)
+
+
+@pytest.mark.parametrize("h, w", [(10, 2000), (40, 640)])
+def test_07d_a_long_thin_photos_sky_mask_finishes(relighter, h, w) -> None:
+    """A 2000 x 10 and a 640 x 40 photo through the whole sky mask (segmenter at 128 px, plausibility, guided
+    upsampling, band, growth): their working images are 128 x 25600 and 128 x 2048, and the component labels'
+    max-pool propagation (up to H * W passes) ran for minutes on the first and 43 s on the second; the one-pass
+    labelling (:func:`physrelight.sky_mask.label_components`) returns. No time is asserted, only the mask."""
+    lin = colour.from_ldr(torch.from_numpy(_outdoor(h, w)).permute(2, 0, 1)[None].float() / 255)
+    sky, why = relighter.photo_sky(lin)
+    assert sky.shape == (1, 1, h, w) and sky.dtype == torch.bool and isinstance(why, str)
 
 
 def _jpeg_with_exif(path: Path, img: np.ndarray, orientation: int, f35: int | None = None) -> None:
@@ -605,155 +510,6 @@ def test_09_refused_input_one_line_exit_2_nothing_written(tmp_path, photo_file, 
     assert list((tmp_path / "out").iterdir()) == []
     if case == "black_photo":
         assert "photo is black" in err
-
-
-def test_04b_a_textured_foreground_keeps_its_outliers_against_a_smooth_sky() -> None:
-    """Foreground texels between the sky's colour and the foreground's mean but well inside the
-    foreground's spread (a pale leaf in a varied canopy): the Gaussian band ('gauss', the default)
-    keeps them foreground because the sky's variance is small; the nearest mean ('local') hands
-    them to the sky. Both keep the step horizon."""
-    from learned.sky_segmentation import refine_sky_boundary
-
-    H, W = 64, 96
-    g = torch.Generator().manual_seed(0)
-    sky_c = torch.tensor([0.3, 0.5, 0.9])
-    img = torch.ones(1, 3, H, W) * sky_c[None, :, None, None]
-    fg = torch.tensor([0.08, 0.12, 0.05])
-    # a canopy whose log colour varies by +-1 (a factor e) about its mean, every channel together
-    tex = torch.exp(torch.empty(1, 1, H - 30, W).uniform_(-1.0, 1.0, generator=g))
-    img[..., 30:, :] = fg[None, :, None, None] * tex
-    pale = torch.zeros(H, W, dtype=torch.bool)
-    pale[33:35, 10:90:6] = True  # pale texels: log colour nearer the sky's mean than the canopy's mean
-    img[0, :, pale] = (fg * torch.exp(torch.tensor(1.6)))[:, None].clamp(max=1.0) * torch.tensor([1.0, 1.4, 2.6])[:, None]
-    coarse = torch.zeros(1, 1, H, W, dtype=torch.bool)
-    coarse[..., :34, :] = True  # the working mask's horizon 4 px low
-    x = torch.log(img.clamp_min(1e-4))[0]
-    mu_sky, mu_fg = x[:, :20].mean((1, 2)), x[:, 40:].mean((1, 2))
-    d_sky = ((x[:, pale] - mu_sky[:, None]) ** 2).sum(0)
-    d_fg = ((x[:, pale] - mu_fg[:, None]) ** 2).sum(0)
-    assert bool((d_sky < d_fg).all())  # the case the nearest mean gets wrong
-    truth = torch.zeros(H, W, dtype=torch.bool)
-    truth[:30] = True
-    local = refine_sky_boundary(coarse, img, band=6, refine="local")[0, 0]
-    gauss = refine_sky_boundary(coarse, img, band=6, refine="gauss")[0, 0]
-    assert bool(local[pale].all())  # the old rule calls every pale texel sky
-    assert not bool(gauss[pale].any())
-    assert bool((gauss[:30] == truth[:30]).all())
-    assert float((gauss != truth).float().mean()) < float((local != truth).float().mean())
-
-
-def _lattice_scene(H: int = 64, W: int = 96):
-    """A noisy sky whose log colour is a quadratic of the position, a lattice tower (2-px dark bars
-    every 6 px) in columns 30-65 from the top down to the ground at row 48, and a textured ground.
-    Returns ``(image (1, 3, H, W), coarse mask, true sky, bars)``: the coarse mask calls the whole
-    tower and the ground foreground, as a working-resolution segmenter does."""
-    g = torch.Generator().manual_seed(1)
-    v = torch.linspace(-0.5, 0.5, H)[:, None].expand(H, W)
-    u = torch.linspace(-0.7, 0.7, W)[None, :].expand(H, W)
-    base = torch.log(torch.tensor([0.25, 0.45, 0.9]))[:, None, None]
-    logsky = base + (0.6 * v + 0.2 * u * u)[None] + 0.01 * torch.randn(3, H, W, generator=g)
-    img = torch.exp(logsky)[None]
-    ground = torch.exp(torch.empty(1, 1, H - 48, W).uniform_(-0.5, 0.5, generator=g))
-    img[..., 48:, :] = torch.tensor([0.15, 0.18, 0.08])[None, :, None, None] * ground
-    bars = torch.zeros(H, W, dtype=torch.bool)
-    cols, rows = torch.arange(W), torch.arange(H)
-    in_tower = (cols >= 30) & (cols < 66)
-    bars[:48] = in_tower[None, :] & ((((cols - 30) % 6) < 2)[None, :] | (((rows[:48] % 6) < 2)[:, None]))
-    img[0, :, bars] = 0.03
-    truth = torch.zeros(H, W, dtype=torch.bool)
-    truth[:48] = True
-    truth &= ~bars
-    coarse = truth.clone()
-    coarse[:, 30:66] = False
-    return img, coarse[None, None], truth, bars
-
-
-def test_04c_the_sky_inside_a_lattice_is_grown_back_by_its_colour() -> None:
-    """Growth by the smooth sky-colour model (the opt-in ``relight --sky-grow``) finds the sky
-    between a lattice's bars that the coarse mask calls solid, and adds no bar or ground pixel."""
-    from learned.sky_segmentation import grow_sky_by_colour
-
-    img, coarse, truth, bars = _lattice_scene()
-    got = grow_sky_by_colour(coarse, img, reach=40, max_spread=0.1)[0, 0]
-    holes = truth & ~coarse[0, 0]
-    assert bool(holes.any())
-    assert float(got[holes].float().mean()) > 0.99
-    assert not bool(got[bars].any()) and not bool(got[48:].any())
-    assert bool(got[coarse[0, 0]].all())  # nothing is removed
-    assert torch.equal(grow_sky_by_colour(coarse, img, reach=0), coarse)
-    # a reach shorter than the distance to the tower's middle leaves its middle alone
-    short = grow_sky_by_colour(coarse, img, reach=6)[0, 0]
-    assert not bool(short[holes & (torch.arange(96) >= 40)[None, :] & (torch.arange(96) < 56)[None, :]].any())
-
-
-def test_04e_the_growths_local_gaussian_at_its_candidates_is_the_whole_images() -> None:
-    """The growth reads the local Gaussian of the non-sky pixels only at its candidates, from summed-area tables
-    (``_local_gaussian_nll_at``): equal to the whole-image box-filter version (``_local_gaussian_nll``) at every
-    pixel, for windows narrower and wider than the image, near its edges and where no weighted pixel is near."""
-    from learned.sky_segmentation import _local_gaussian_nll, _local_gaussian_nll_at
-
-    g = torch.Generator().manual_seed(3)
-    for h, w, r, density in ((40, 60, 3, 0.4), (64, 96, 17, 0.4), (120, 80, 40, 0.05), (50, 50, 200, 0.4),
-                             (30, 70, 2, 0.01)):
-        x = torch.randn(1, 3, h, w, generator=g, dtype=torch.float64)
-        wt = (torch.rand(1, 1, h, w, generator=g) < density).double()
-        full = _local_gaussian_nll(x, wt, r)[0, 0].flatten()
-        at = _local_gaussian_nll_at(x, wt, r, torch.arange(h * w))
-        torch.testing.assert_close(at, full, rtol=1e-10, atol=1e-10)
-        some = torch.randperm(h * w, generator=g)[:17]
-        torch.testing.assert_close(_local_gaussian_nll_at(x, wt, r, some), full[some], rtol=1e-10, atol=1e-10)
-
-
-@pytest.mark.parametrize("band", [3, 16, 17, 40, 400])
-def test_04g_the_bands_one_pass_forms_equal_their_definitions(band) -> None:
-    """The colour band's speed-ups give the same bits: its pixels from one window count of the sky (wide bands)
-    equal the two dilations, and its Gaussians from one box filter of the weight and both moments equal
-    :func:`_local_mean` of ``x`` and of ``x^2`` (the gate at ``MIN_SURE_SHARE`` and at 0)."""
-    from learned.sky_segmentation import VARIANCE_FLOOR, _boundary_band, _dilate, _local_gaussian_nll, _local_mean
-
-    g = torch.Generator().manual_seed(band)
-    h, w = 90, 130
-    blobs = F.interpolate(torch.rand(1, 1, 9, 13, generator=g), size=(h, w), mode="bilinear") > 0.5
-    assert torch.equal(_boundary_band(blobs, band), _dilate(blobs, band) & _dilate(~blobs, band))
-    x = torch.randn(1, 3, h, w, generator=g)
-    wt = (blobs & (torch.rand(1, 1, h, w, generator=g) < 0.7)).float()
-    for share in (0.0, 0.125):
-        mu = _local_mean(wt, x, band, share)
-        var = (_local_mean(wt, x * x, band, share) - mu * mu).clamp_min(0) + VARIANCE_FLOOR
-        want = ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
-        assert torch.equal(_local_gaussian_nll(x, wt, band, share), want)
-
-
-def test_04d_the_growth_neither_extrapolates_the_sky_nor_trusts_a_mixed_mask() -> None:
-    """(a) A ground whose colour is the sky's gradient carried on below the horizon is added when the
-    sky model is extrapolated, and not when it is clamped to the fitted pixels (the default).
-    (b) A mask that already holds a dark façade gives the model a wide spread: with ``max_spread``
-    nothing is added. Bad arguments are refused by name."""
-    from learned.sky_segmentation import grow_sky_by_colour
-
-    H, W = 64, 96
-    g = torch.Generator().manual_seed(2)
-    v = torch.linspace(-0.5, 0.5, H)[:, None, None].expand(H, W, 1).permute(2, 0, 1)
-    logsky = torch.log(torch.tensor([0.25, 0.45, 0.9]))[:, None, None] - 2.0 * v  # brighter toward the horizon
-    img = torch.exp(logsky + 0.01 * torch.randn(3, H, W, generator=g))[None]
-    img[..., 30:44, :] = 0.03  # a dark treeline
-    img[..., 44:, :] *= torch.exp(torch.empty(1, 1, H - 44, W).uniform_(-0.4, 0.4, generator=g))  # textured ground
-    sky = torch.zeros(1, 1, H, W, dtype=torch.bool)
-    sky[..., :30, :] = True
-    loose = grow_sky_by_colour(sky, img, reach=40, clamp=False)[0, 0]
-    tight = grow_sky_by_colour(sky, img, reach=40)[0, 0]
-    assert float(loose[44:].float().mean()) > 0.1  # the ground texels within the gate: about a sixth
-    assert not bool(tight[30:].any())
-    img2, coarse, truth, bars = _lattice_scene()
-    mixed = coarse.clone()
-    mixed[..., :40, 66:90] = True  # a dark façade taken for sky
-    img2[..., :40, 66:90] = torch.tensor([0.05, 0.04, 0.03])[None, :, None, None]
-    assert torch.equal(grow_sky_by_colour(mixed, img2, reach=40, max_spread=0.1), mixed)
-    for kw, word in ((dict(reach=-1), "reach"), (dict(reach=4, chi2=0.0), "chi2"), (dict(reach=4, order=3), "order")):
-        with pytest.raises(ValueError, match=word):
-            grow_sky_by_colour(coarse, img2, **kw)
-    with pytest.raises(ValueError, match="image"):
-        grow_sky_by_colour(coarse, img2[..., :10, :], reach=4)
 
 
 def test_10_an_sh_targets_fitted_sky_is_the_sky_its_sh_came_from(relighter) -> None:
