@@ -33,6 +33,7 @@ T_SRC = "tests/learned/test_source_lighting.py"
 T_PINS = "tests/learned/test_relight_pins.py"
 T_REAL = "tests/learned/test_relight_real.py"
 T_CLI = "tests/learned/test_relight_cli.py"
+T_MASK = "tests/physrelight/test_sky_mask.py"
 PINS_STORED = f"{T_PINS}::test_10_the_shipped_pipeline_reproduces_its_stored_output_on_a_fixed_photo"
 
 
@@ -80,12 +81,12 @@ MUTATIONS: tuple[Mutation, ...] = (
     Mutation("10 exposure: gain clamp dropped", "physrelight/exposure.py",
              "return gain.clamp(2.0**-16, 2.0**16)", "return gain",
              (f"{T_PHYS}::test_07e_a_black_or_blinding_relighting_keeps_a_finite_gain_of_at_most_16_stops",)),
-    Mutation("11 sky segmentation: minimum sky fraction doubled", "learned/sky_segmentation.py",
+    Mutation("11 sky mask: minimum sky fraction doubled", "physrelight/sky_mask.py",
              "MIN_SKY_FRACTION = 0.01", "MIN_SKY_FRACTION = 0.02",
-             (f"{T_REAL}::test_06f_a_sky_of_one_percent_of_the_photo_is_enough",)),
-    Mutation("12 sky segmentation: inner-sky brightness threshold halved", "learned/sky_segmentation.py",
+             (f"{T_MASK}::test_12_a_sky_of_one_percent_of_the_photo_is_enough",)),
+    Mutation("12 sky mask: inner-sky brightness threshold halved", "physrelight/sky_mask.py",
              ">= 0.5 * ref_lum and", ">= 0.25 * ref_lum and",
-             (f"{T_REAL}::test_06g_sky_between_towers_is_kept_when_half_as_bright_and_as_blue",)),
+             (f"{T_MASK}::test_13_sky_between_towers_is_kept_when_half_as_bright_and_as_blue",)),
     Mutation("13 relight CLI: --pitch ignored", "learned/relight_cli.py",
              "pitch_deg=args.pitch,", "pitch_deg=None,",
              (f"{T_CLI}::test_10_pitch_reaches_the_relighter",)),

@@ -287,47 +287,6 @@ def test_06d_a_small_noisy_photo_keeps_its_sky_and_a_textured_top_stays_refused(
             assert "textured" in why
 
 
-def _sky_over_texture(seed: int = 0, h: int = 100, w: int = 100) -> torch.Tensor:
-    """``(3, h, w)`` linear: a brown ground textured over a stop, for a smooth blue sky to be put on."""
-    g = torch.Generator().manual_seed(seed)
-    return torch.tensor([0.30, 0.25, 0.18])[:, None, None] * torch.exp(torch.rand(1, h, w, generator=g) - 0.5)
-
-
-SKY_BLUE = torch.tensor([0.40, 0.55, 0.90])[:, None, None]
-
-
-@pytest.mark.parametrize("columns, kept", [(12, True), (15, True), (8, False), (5, False)])
-def test_06f_a_sky_of_one_percent_of_the_photo_is_enough(columns: int, kept: bool) -> None:
-    """A smooth blue patch at the top of a textured 100 x 100 photo is a sky from 1 % of the photo on
-    (:data:`MIN_SKY_FRACTION`): 1.2 % and 1.5 % are kept, 0.8 % and 0.5 % refused with the share in the reason."""
-    from learned import sky_segmentation as ss
-
-    mask = torch.zeros(100, 100, dtype=torch.bool)
-    mask[:10, 20:20 + columns] = True
-    sky, why = ss.plausible_sky(mask, torch.where(mask, SKY_BLUE, _sky_over_texture()))
-    assert bool(sky.any()) == kept and (why == "") == kept, why
-    if kept:
-        assert torch.equal(sky, mask)
-    else:
-        assert why == f"the sky found covers {columns / 10:.1f} % of the photo"
-
-
-@pytest.mark.parametrize("brightness, kept", [(0.35, False), (0.45, False), (0.55, True), (0.8, True)])
-def test_06g_sky_between_towers_is_kept_when_half_as_bright_and_as_blue(brightness: float, kept: bool) -> None:
-    """A sky patch that does not touch the top (sky seen between towers) is kept when its median luminance is at
-    least half the top sky's (and it is as blue): at 0.55 and 0.8 of it, not at 0.45 or 0.35. The top sky is
-    kept either way."""
-    from learned import sky_segmentation as ss
-
-    top = torch.zeros(100, 100, dtype=torch.bool)
-    top[:20] = True
-    inner = torch.zeros_like(top)
-    inner[40:60, 40:60] = True
-    image = torch.where(inner, brightness * SKY_BLUE, torch.where(top, SKY_BLUE, _sky_over_texture()))
-    sky, why = ss.plausible_sky(top | inner, image)
-    assert why == "" and torch.equal(sky, top | inner if kept else top)
-
-
 def test_07_the_rocket_has_a_sky_and_its_towers_stay(relighter) -> None:
     skimage = pytest.importorskip("skimage")
     photo = skimage.data.rocket()
