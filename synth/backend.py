@@ -110,7 +110,8 @@ def load_mitsuba(differentiable: bool = False) -> ModuleType:
     else:
         reason = f"no LLVM >= {MIN_LLVM} shared library found"
     if differentiable:
-        raise MissingSetup(f"differentiable rendering needs Mitsuba's {DIFFERENTIABLE_VARIANT}: {reason}; {_INSTALL_HINT}")
+        raise MissingSetup(f"differentiable rendering needs Mitsuba's {DIFFERENTIABLE_VARIANT}: {reason}; "
+                           f"{_INSTALL_HINT}")
     warnings.warn(f"{reason}; falling back to {FALLBACK_VARIANT} (slower, not differentiable)", stacklevel=2)
     mi.set_variant(FALLBACK_VARIANT)
     return mi

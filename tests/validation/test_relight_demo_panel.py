@@ -72,7 +72,8 @@ def test_03_the_panel_has_an_error_map_beside_each_method_and_one_colour_bar() -
     fig = panel_figure("src", rows, [np.zeros((8, 8, 3))] * 3)
     ncols = 2 + 2 * len(PANEL_METHODS)
     assert len(fig.axes) == 3 * ncols + 1  # one colour bar for all the error maps
-    error_images = [ax.images[0] for ax in fig.axes[:2 * ncols] if ax.images and ax.images[0].get_cmap().name == "magma"]
+    error_images = [ax.images[0] for ax in fig.axes[:2 * ncols]
+                    if ax.images and ax.images[0].get_cmap().name == "magma"]
     assert len(error_images) == 2 * len(PANEL_METHODS)
     assert len({im.get_clim() for im in error_images}) == 1  # one colour scale
     assert fig.axes[-1].get_ylabel().startswith("|relit - target|")

@@ -58,6 +58,7 @@ _MODE_OPTIONS = {
     "full_resolution": ("data", "native_data"),
 }
 _DEFAULT_FOV = (45.0, 75.0)
+ABS_LABEL = "mitsuba_analysis_by_synthesis"
 
 
 def _given(args: argparse.Namespace, dest: str) -> bool:
@@ -96,9 +97,6 @@ def check_llvm(with_abs: bool) -> None:
                            f"no LLVM >= {backend.MIN_LLVM} library was found: run `{SETUP_COMMAND}` (it installs "
                            "libllvm19) or set DRJIT_LIBLLVM_PATH to a libLLVM >= 16; or skip that baseline with "
                            "--no-abs")
-
-
-ABS_LABEL = "mitsuba_analysis_by_synthesis"
 
 
 def _handler(args: argparse.Namespace) -> int:
@@ -165,7 +163,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "(default: --quick renders its own, --full reads data/heldout)")
     p.add_argument("-o", "--output", default="out/bench", help="report folder (default: out/bench)")
     p.add_argument("--threads", type=positive_int, default=2, help="torch threads while timing (default 2)")
-    p.add_argument("--runs", default=None, metavar="DIR",
+    p.add_argument("--runs", default=None, metavar="DIR",  # None: not given (check_mode_options), then "runs"
                    help="where the width sweep finds runs/width_4, width_8, width_16 (default: runs)")
     p.add_argument("--no-abs", action="store_true", help="skip the (slow) analysis-by-synthesis baseline")
     p.add_argument("--weights", default=None, metavar="DIR",
@@ -175,7 +173,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --real: a folder of lat-long .exr/.hdr panoramas to score (default: the shipped ones)")
     p.add_argument("--fov", nargs=2, type=float, default=None, metavar=("LO", "HI"),
                    help="with --real: the crops' horizontal field of view range in degrees (default: 45 75)")
-    p.add_argument("--seed", type=int, default=None, help="with --real: crops, photo noise and SkyGAN noise (default 0)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="with --real: crops, photo noise and SkyGAN noise (default 0)")
     p.add_argument("--full-resolution", action="store_true",
                    help="relit l1 and halo error at depth edges of a synth folder rendered at 256 px (--data, default "
                         "data/heldout256): working at 64 px with bilinear or guided transfer, or at 256 px "
