@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DECOMPOSITION_LAYERS", "MAX_SEQUENCE", "PROGRESS_PIXELS", "SUN_AZIMUTH_LIMIT", "add_parser",
+__all__ = ["DECOMPOSITION_LAYERS", "LAYER_FILES", "MAX_SEQUENCE", "PROGRESS_PIXELS", "SUN_AZIMUTH_LIMIT", "add_parser",
            "layer_with_alpha", "sequence_bytes", "sun_direction"]
 
 MAX_SEQUENCE = 720
@@ -75,6 +75,8 @@ PROGRESS_PIXELS = 1_000_000
 about 5 s at one thread for 2000 x 1334, 40 s for 4000 x 2669 (docs/bench.md)."""
 DECOMPOSITION_LAYERS = ("albedo", "normals", "shadow", "target_shadow", "shading")
 """The layers of ``--layers`` that describe surfaces: written transparent on the sky (:func:`layer_with_alpha`)."""
+LAYER_FILES = ("relit", *DECOMPOSITION_LAYERS, "sky_mask")
+"""The files ``--layers DIR`` writes, as ``DIR/NAME.png`` (checked before any work not to be an input)."""
 
 
 @contextlib.contextmanager
@@ -264,8 +266,11 @@ def _relight(args: argparse.Namespace) -> int:
     exposure = parse_exposure(args.exposure)
     from physrelight.cli_common import check_not_input
 
-    check_not_input(out, {"input photo": args.photo, "--mask": args.mask, "--env": args.env, "--sh": args.sh,
-                          "--source-env": args.source_env, "--source-sh": args.source_sh})
+    inputs = {"input photo": args.photo, "--mask": args.mask, "--env": args.env, "--sh": args.sh,
+              "--source-env": args.source_env, "--source-sh": args.source_sh}
+    check_not_input(out, inputs)
+    for name in LAYER_FILES if args.layers is not None else ():  # the folder may hold the photo, not a layer's name
+        check_not_input(Path(args.layers) / f"{name}.png", inputs)
     if args.sequence:
         _check_sequence(args.sequence, 1, 1)  # the frame cap, before the photo is read
     photo = io.read_photo(args.photo)  # one-line ValueError for missing, corrupt or palette files
@@ -328,6 +333,8 @@ def _relight(args: argparse.Namespace) -> int:
         d.mkdir(parents=True, exist_ok=True)  # checked before any work (physrelight.cli_common.check_outputs)
         sky = layers["sky_mask"][..., 0] > 0.5
         for name, img in layers.items():
+            if name not in LAYER_FILES:  # a layer the early check did not know of: never over an input either
+                check_not_input(d / f"{name}.png", inputs)
             io.write_png(d / f"{name}.png", layer_with_alpha(img, sky) if name in DECOMPOSITION_LAYERS else img)
         print(f"layers ({', '.join(layers)}) -> {d}")
     print(f"relit {image.shape[1]}x{image.shape[0]} -> {out}")

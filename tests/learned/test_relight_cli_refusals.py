@@ -84,10 +84,17 @@ def test_03_the_output_may_not_be_the_input_photo(photo: Path, tmp_path: Path, c
 
 def test_04_layers_beside_the_photo_are_fine_but_not_the_photo_itself(photo: Path, tmp_path: Path, capsys) -> None:
     """``--layers`` into the photo's own folder is allowed (it writes named layers, not the photo); the checks
-    let it through to the relighting."""
+    let it through to the relighting. A photo named like a layer (``albedo.png``) in that folder is refused."""
+    before = photo.read_bytes()
     assert main(["relight", str(photo), "--sun", "20", "0", "--method", "quotient", "--threads", "1", "--quiet",
-                 "--layers", str(tmp_path), "-o", str(tmp_path / "relit.png")]) == 0
-    assert (tmp_path / "albedo.png").is_file() and (tmp_path / "photo.png").is_file()
+                 "--layers", str(tmp_path), "-o", str(tmp_path / "out.png")]) == 0
+    assert (tmp_path / "albedo.png").is_file() and photo.read_bytes() == before
+    named = tmp_path / "sub" / "albedo.png"
+    named.parent.mkdir()
+    named.write_bytes(before)
+    _refused(capsys, ["relight", str(named), "--sun", "20", "0", "--layers", str(named.parent),
+                      "-o", str(tmp_path / "o2.png")], "is the input photo")
+    assert named.read_bytes() == before and not (tmp_path / "o2.png").exists()
 
 
 @pytest.mark.parametrize("sun, match", [
