@@ -290,7 +290,7 @@ def _add_sky_stages(tsub: argparse._SubParsersAction) -> None:
         p.add_argument("--json", default=None, help="write the --evaluate figures here (sky: and a PNG panel "
                                                       "beside it)")
         p.add_argument("--quiet", action="store_true", help="no progress bar")
-        p.set_defaults(handler=_train_sky_stage)
+        p.set_defaults(handler=_train_sky_stage, output_folders=("out",), output_files=("export", "json"))
 
 
 def _train_renderer(args: argparse.Namespace) -> int:
@@ -363,14 +363,14 @@ def _add_renderer_stages(tsub: argparse._SubParsersAction) -> None:
                     help="compare cross-projections without the per-channel scale match")
     rn.add_argument("--d-width", type=positive_int, default=16, help="discriminator width (default: 16)")
     rn.add_argument("--lr-d", type=float, default=2e-4, help="discriminator learning rate (default: 2e-4)")
-    rn.set_defaults(handler=_train_renderer)
+    rn.set_defaults(handler=_train_renderer, output_folders=("out",))
 
     ex = tsub.add_parser("export-renderer", help="write the renderer's weights-only safetensors")
     ex.add_argument("--run", required=True, help="renderer run folder")
     ex.add_argument("--step", type=positive_int, default=None, help="checkpoint step (default: the latest)")
     ex.add_argument("--dest", default="learned/weights/renderer.safetensors",
                     help="destination file (default: learned/weights/renderer.safetensors)")
-    ex.set_defaults(handler=_export_renderer)
+    ex.set_defaults(handler=_export_renderer, output_files=("dest",))
 
     ev = tsub.add_parser("evaluate-relight", help="held-out relighting vs path tracing: proposed vs baselines")
     ev.add_argument("--data", required=True, help="synth dataset folder with ground truth")
@@ -385,7 +385,7 @@ def _add_renderer_stages(tsub: argparse._SubParsersAction) -> None:
     ev.add_argument("--threads", type=positive_int, default=1)
     ev.add_argument("--json", default=None, help="also write the metrics here")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
-    ev.set_defaults(handler=_evaluate_relight)
+    ev.set_defaults(handler=_evaluate_relight, output_files=("json",))
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -417,13 +417,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     inv.add_argument("--degrade-under-ev", type=float, default=0.0, metavar="STOPS",
                      help="with --degrade: half the time the photo is also taken up to STOPS under-exposed (uniform) "
                           "and brought back after quantisation, as metering brings a dark photo back (default: 0)")
-    inv.set_defaults(handler=_train_inverse)
+    inv.set_defaults(handler=_train_inverse, output_folders=("out",))
 
     sh = tsub.add_parser("shadow", help="ShadowNet on a trained inverse network")
     _common(sh)
     _mirror(sh)
     sh.add_argument("--inverse", required=True, help="inverse run folder or exported weights")
-    sh.set_defaults(handler=_train_shadow)
+    sh.set_defaults(handler=_train_shadow, output_folders=("out",))
 
     ev = tsub.add_parser("evaluate", help="held-out metrics of weights vs trivial baselines")
     ev.add_argument("--data", required=True, help="synth dataset folder with ground truth")
@@ -435,7 +435,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                          "the differences of the per-photo metrics with scene-bootstrap intervals")
     ev.add_argument("--threads", type=positive_int, default=2)
     ev.add_argument("--json", default=None, help="also write the metrics here")
-    ev.set_defaults(handler=_evaluate)
+    ev.set_defaults(handler=_evaluate, output_files=("json",))
 
     ex = tsub.add_parser("export", help="write weights-only safetensors for Relighter.load")
     ex.add_argument("--inverse", required=True, help="inverse run folder")
@@ -460,7 +460,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ex.add_argument("--meter-exposure", action="store_true",
                     help="the exported inverse network sees each photo re-metered to the training exposure "
                          "(learned.networks.metered), so its layers do not depend on the photo's exposure")
-    ex.set_defaults(handler=_export)
+    ex.set_defaults(handler=_export, output_folders=("dest",))
 
     _add_sky_stages(tsub)
     _add_renderer_stages(tsub)

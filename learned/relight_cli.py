@@ -61,13 +61,22 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DECOMPOSITION_LAYERS", "PROGRESS_PIXELS", "add_parser", "layer_with_alpha", "sun_direction"]
+__all__ = ["DECOMPOSITION_LAYERS", "LAYER_FILES", "MAX_SEQUENCE", "PROGRESS_PIXELS", "SUN_AZIMUTH_LIMIT", "add_parser",
+           "layer_with_alpha", "sequence_bytes", "sun_direction"]
 
+MAX_SEQUENCE = 720
+"""The most frames ``--sequence`` takes: one every half degree of the 360-degree sweep (a 12 fps GIF of a minute),
+and the frames are all held in memory until the GIF is written (:func:`sequence_bytes` bounds them too)."""
+SUN_AZIMUTH_LIMIT = 360.0
+"""``--sun``'s and ``--azimuth``'s angles lie in [-360, 360] degrees: refused beyond, not wrapped, since a larger
+number is far likelier a slip (swapped or mistyped arguments) than a meant turn."""
 PROGRESS_PIXELS = 1_000_000
 """A single relighting of a photo this large (pixels) or larger shows its stages on stderr unless ``--quiet``:
 about 5 s at one thread for 2000 x 1334, 40 s for 4000 x 2669 (docs/bench.md)."""
 DECOMPOSITION_LAYERS = ("albedo", "normals", "shadow", "target_shadow", "shading")
 """The layers of ``--layers`` that describe surfaces: written transparent on the sky (:func:`layer_with_alpha`)."""
+LAYER_FILES = ("relit", *DECOMPOSITION_LAYERS, "sky_mask")
+"""The files ``--layers DIR`` writes, as ``DIR/NAME.png`` (checked before any work not to be an input)."""
 
 
 @contextlib.contextmanager
@@ -176,23 +185,42 @@ def _write_gif(path: Path, frames: list[np.ndarray], fps: float) -> None:
         imgs[0].save(tmp, format="GIF", save_all=True, append_images=imgs[1:], duration=round(1000 / fps), loop=0)
 
 
-def _check_outputs(out: Path, layers: str | None) -> None:
-    """Refuse, before any work, outputs that cannot be written (so a failed run writes nothing)."""
-    import os
+def _check_sequence(frames: int, height: int, width: int) -> None:
+    """Refuse, before any work, a ``--sequence`` that cannot be held: more than :data:`MAX_SEQUENCE` frames, or
+    frames that need more memory than there is (:func:`sequence_bytes` against
+    :func:`physrelight.cli_common.check_fits_in_memory`)."""
+    from physrelight.cli_common import check_fits_in_memory
 
-    folders = [out.parent if str(out.parent) else Path(".")]
-    if out.is_dir():
-        raise ValueError(f"output {str(out)!r} is a folder, not a file")
-    if layers is not None:
-        d = Path(layers)
-        if d.exists() and not d.is_dir():
-            raise ValueError(f"--layers {layers!r} is a file, not a folder")
-        folders.append(d if d.exists() else d.parent if str(d.parent) else Path("."))
-    for f in folders:
-        if not f.is_dir():
-            raise ValueError(f"cannot write into {str(f)!r}: no such folder")
-        if not os.access(f, os.W_OK | os.X_OK):
-            raise ValueError(f"cannot write into {str(f)!r}: permission denied")
+    if frames > MAX_SEQUENCE:
+        raise ValueError(f"--sequence {frames}: at most {MAX_SEQUENCE} frames (one every "
+                         f"{360 / MAX_SEQUENCE:g} degrees; the frames are held in memory until the GIF is written)")
+    check_fits_in_memory(sequence_bytes(frames, height, width),
+                         f"--sequence {frames} of a {width}x{height} photo (the frames are held in memory until "
+                         f"the GIF is written)")
+
+
+def sequence_bytes(frames: int, height: int, width: int) -> int:
+    """Bytes that ``--sequence frames`` of a ``height x width`` photo holds before the GIF is written: every
+    frame as float32 RGB (what :meth:`Relighter.relight_sequence` returns) and its 8-bit copy for the GIF."""
+    return frames * height * width * 3 * (4 + 1)
+
+
+def _denoise_note(image: np.ndarray) -> str | None:
+    """Why ``--denoise`` will leave the photo ``(H, W, 3)`` (display values, or radiance) as it is, or None when
+    it acts: the denoise is set by the noise floor measured in the photo's flattest tiles
+    (:func:`physrelight.denoise.noise_sigma`), and a floor of 0 in every channel means there is nothing to remove."""
+    import torch
+
+    from physrelight import colour
+    from physrelight.denoise import FLOOR_BLOCK, noise_sigma
+
+    t = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1)[None]
+    lin = t if image.dtype != np.uint8 and float(t.max()) > 1.0 else colour.from_ldr(t.clamp(0.0, 1.0))
+    if bool((noise_sigma(lin) > 0).any()):
+        return None
+    return (f"--denoise changes nothing here: no noise was measured in the photo's flattest {FLOOR_BLOCK} x "
+            f"{FLOOR_BLOCK} tiles (a clean photo, or JPEG compression removed the noise there), so it is relit "
+            "as it is")
 
 
 def _relight(args: argparse.Namespace) -> int:
@@ -214,9 +242,18 @@ def _relight(args: argparse.Namespace) -> int:
     linear = out.suffix.lower() == ".exr"
     if args.sky is not None and args.sun is None:
         raise ValueError("--sky chooses the sky of a --sun target; an --env or --sh target brings its own")
-    if args.sun is not None and (args.sky or "clear") == "clear" and not args.sun[0] > 0:
-        raise ValueError(f"--sun {args.sun[0]:g} {args.sun[1]:g}: a clear sky's sun must be above the horizon "
-                         f"(ELEV > 0); --sky overcast gives a sunless sky")
+    if args.sun is not None:
+        elev, azim = args.sun
+        if not abs(azim) <= SUN_AZIMUTH_LIMIT:
+            raise ValueError(f"--sun {elev:g} {azim:g}: the azimuth AZIM must lie in [-{SUN_AZIMUTH_LIMIT:g}, "
+                             f"{SUN_AZIMUTH_LIMIT:g}] degrees")
+        if not elev <= 90:
+            raise ValueError(f"--sun {elev:g} {azim:g}: the sun elevation ELEV must lie in (0, 90] degrees")
+        if (args.sky or "clear") == "clear" and not elev > 0:
+            raise ValueError(f"--sun {elev:g} {azim:g}: a clear sky's sun must be above the horizon "
+                             f"(ELEV in (0, 90]); --sky overcast gives a sunless sky")
+        if not elev >= -90:
+            raise ValueError(f"--sun {elev:g} {azim:g}: the sun elevation ELEV must lie in [-90, 90] degrees")
     if args.source_env is not None or args.source_sh is not None:
         # The known-source track: the quotient divides by the given lighting (bench: quotient_known, and
         # proposed_known for the shipped renderer on top of it, study 29); resynthesis methods cannot use it.
@@ -227,11 +264,21 @@ def _relight(args: argparse.Namespace) -> int:
 
         args.method = DEFAULT_METHOD
     exposure = parse_exposure(args.exposure)
-    _check_outputs(out, args.layers)
+    from physrelight.cli_common import check_not_input
+
+    inputs = {"input photo": args.photo, "--mask": args.mask, "--env": args.env, "--sh": args.sh,
+              "--source-env": args.source_env, "--source-sh": args.source_sh}
+    check_not_input(out, inputs)
+    for name in LAYER_FILES if args.layers is not None else ():  # the folder may hold the photo, not a layer's name
+        check_not_input(Path(args.layers) / f"{name}.png", inputs)
+    if args.sequence:
+        _check_sequence(args.sequence, 1, 1)  # the frame cap, before the photo is read
     photo = io.read_photo(args.photo)  # one-line ValueError for missing, corrupt or palette files
     for note in photo.notes:
         print(f"physrelight: note: {args.photo}: {note}", file=sys.stderr)
     image = photo.image
+    if args.sequence:
+        _check_sequence(args.sequence, *image.shape[:2])
     mask = None
     if args.mask is not None:
         mask = io.read_mask(args.mask)
@@ -253,6 +300,9 @@ def _relight(args: argparse.Namespace) -> int:
     relighter.sky_grow = args.sky_grow
     if args.denoise:
         relighter.denoise = DENOISE
+        note = _denoise_note(image)
+        if note is not None:
+            print(f"physrelight: note: {note}", file=sys.stderr)
     common = dict(sky_mask=mask, method=args.method, sky=args.sky or "clear", new_sky=not args.keep_sky,
                   seed=args.seed, sky_source=args.sky_source, exposure=exposure,
                   fov_deg=fov if fov is not None else DEFAULT_FOV_DEG, pitch_deg=args.pitch, source=source,
@@ -280,9 +330,11 @@ def _relight(args: argparse.Namespace) -> int:
         io.write_png(out, layers["relit"])
     if args.layers is not None:
         d = Path(args.layers)
-        d.mkdir(exist_ok=True)
+        d.mkdir(parents=True, exist_ok=True)  # checked before any work (physrelight.cli_common.check_outputs)
         sky = layers["sky_mask"][..., 0] > 0.5
         for name, img in layers.items():
+            if name not in LAYER_FILES:  # a layer the early check did not know of: never over an input either
+                check_not_input(d / f"{name}.png", inputs)
             io.write_png(d / f"{name}.png", layer_with_alpha(img, sky) if name in DECOMPOSITION_LAYERS else img)
         print(f"layers ({', '.join(layers)}) -> {d}")
     print(f"relit {image.shape[1]}x{image.shape[0]} -> {out}")
@@ -300,7 +352,7 @@ def _exposure(text: str) -> str | float:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``relight``."""
-    from physrelight.cli_common import number_in, positive_int, positive_number
+    from physrelight.cli_common import finite_number, number_in, positive_int, positive_number
     from physrelight.sky_mask import GROW_REACH
 
     from .relighter import RELIGHT_METHODS, SKY_SOURCES, SKY_TYPES
@@ -311,8 +363,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     tgt = p.add_mutually_exclusive_group(required=True)
     tgt.add_argument("--env", help="target environment map (lat-long .exr or .hdr, world frame, Y up)")
     tgt.add_argument("--sh", help="target order-2 radiance SH, world frame: .npy, .json or text, shape (9, 3)")
-    tgt.add_argument("--sun", nargs=2, type=float, metavar=("ELEV", "AZIM"),
-                     help="target sun elevation (> 0 for a clear sky) and azimuth in degrees (see above), with --sky")
+    tgt.add_argument("--sun", nargs=2, type=finite_number("an angle in degrees"), metavar=("ELEV", "AZIM"),
+                     help="target sun elevation in (0, 90] for a clear sky and azimuth in [-360, 360], in degrees "
+                          "(see above), with --sky")
     p.add_argument("--sky", choices=SKY_TYPES, default=None, help="sky type for --sun (default: clear)")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--source-env", default=None, metavar="MAP",
@@ -327,7 +380,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "model fitted to the target's SH), gan (SkyGAN; default for --sh), keep (the photo's)")
     p.add_argument("--exposure", type=_exposure, default="auto",
                    help="auto (meter like a camera; default), keep (same camera settings) or stops (e.g. -1)")
-    p.add_argument("--azimuth", type=float, default=0.0, help="turn the target about the vertical (degrees)")
+    p.add_argument("--azimuth", type=number_in(-SUN_AZIMUTH_LIMIT, SUN_AZIMUTH_LIMIT, "an azimuth in degrees"),
+                   default=0.0, help="turn the target about the vertical (degrees, in [-360, 360])")
     p.add_argument("--mask", default=None, help="sky mask PNG (white = sky), the photo's size "
                                                 "(default: the shipped sky segmenter's)")
     p.add_argument("--sky-grow", type=number_in(0.0, 1.0, "a fraction of the photo's short side"), default=GROW_REACH,
@@ -344,7 +398,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="also write albedo, normals, shadows, shading (RGBA: transparent on the sky, where they "
                         "describe nothing) and the sky mask (white = sky) into this folder")
     p.add_argument("--sequence", type=positive_int, default=None, metavar="N",
-                   help="sweep the azimuth over 360 degrees in N frames; write an animated GIF")
+                   help=f"sweep the azimuth over 360 degrees in N frames (at most {MAX_SEQUENCE}, and what fits in "
+                        "memory); write an animated GIF")
     p.add_argument("--fps", type=positive_number, default=12.0, help="GIF frame rate (default: 12)")
     p.add_argument("--method", choices=RELIGHT_METHODS, default=None,
                    help="relighting method (default: proposed, the neural renderer on top of the quotient image; "
@@ -354,4 +409,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true",
                    help="no progress bar (shown for --sequence and for photos of a megapixel or more)")
     p.add_argument("-o", "--output", required=True, help="output .png, .exr (linear radiance, float32) or .gif with --sequence")
-    p.set_defaults(handler=_relight)
+    p.set_defaults(handler=_relight, output_files=("output",), output_folders=("layers",))

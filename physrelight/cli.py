@@ -12,7 +12,9 @@ Before a handler runs, the optional extras it needs are checked
 the ``pip install`` that adds it, before any work and with nothing written. Every
 subcommand has ``--help``, shows progress on long work, and exits non-zero with a one-line
 reason on bad input (``ValueError``/``FileNotFoundError`` become ``physrelight: error:
-...``), never a traceback.
+...``), never a traceback. Argument errors are one line too (``physrelight relight: error: ...``, exit 2; the
+usage is in ``--help``). Every output path a subcommand declares (``output_files``/``output_folders``) is checked
+before its handler runs (:func:`physrelight.cli_common.check_outputs`).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import sys
 from dataclasses import dataclass
 from typing import Sequence
 
-from physrelight.cli_common import MissingExtra, positive_int, require_extras
+from physrelight.cli_common import MissingExtra, MissingSetup, check_outputs, positive_int, require_extras
 
 __all__ = ["SUBCOMMANDS", "Subcommand", "build_parser", "main", "positive_int"]
 # positive_int is re-exported for validation/bench/cli.py, which still imports it from here;
@@ -69,6 +71,13 @@ relight_metrics.json/.md.
 """
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit 2): the usage stays in ``--help``."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def _demo(args: argparse.Namespace) -> int:
     if not args.physics_only:  # part 2 renders with Mitsuba: say so before part 1 spends a minute
         require_extras("demo", ("synth",), "or run part 1 alone with --physics-only")
@@ -96,7 +105,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scene-size", type=positive_int, default=96, help="synthetic scene size in pixels (default: 96)")
     p.add_argument("--seed", type=int, default=7, help="synthetic scene seed (default: 7)")
     p.add_argument("--physics-only", action="store_true", help="only part 1 (no Mitsuba, no networks)")
-    p.set_defaults(handler=_demo)
+    p.set_defaults(handler=_demo, output_folders=("output",))
 
 
 # ----------------------------------------------------------------------------- dispatch
@@ -109,8 +118,7 @@ def _chosen(argv: Sequence[str]) -> str | None:
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser with ``command``'s full subparser (its stage module imported) and the others listed only."""
-    parser = argparse.ArgumentParser(prog="physrelight",
-                                     description="Single-image outdoor relighting, physics-checked.")
+    parser = _Parser(prog="physrelight", description="Single-image outdoor relighting, physics-checked.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, spec in SUBCOMMANDS.items():
         if name == command:
@@ -128,8 +136,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         require_extras(args.command, SUBCOMMANDS[args.command].extras)
+        check_outputs(args)  # before any work: a bad output path is one line, not a traceback minutes later
         return args.handler(args)
-    except (ValueError, FileNotFoundError, MissingExtra) as err:
+    except (ValueError, FileNotFoundError, MissingExtra, MissingSetup) as err:
         print(f"physrelight: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

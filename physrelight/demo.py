@@ -21,8 +21,7 @@ import numpy as np
 import torch
 
 from physrelight import colour, envmap, image_model, io, metrics, sh
-
-HDRI_DIR = Path(__file__).resolve().parent / "data" / "hdri"
+from physrelight.data import hdri
 
 
 def sphere_normals(size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -80,16 +79,13 @@ def run(out_dir: str | Path, source: str = "city", targets: tuple[str, ...] = ("
     """
     from physrelight import rotations  # local: only the demo needs it
 
-    names = sorted(p.stem for p in HDRI_DIR.glob("*.exr"))
-    for name in (source, *targets):
-        if name not in names:
-            raise ValueError(f"unknown HDRI {name!r}; shipped maps are {names}")
+    paths = {name: hdri(name) for name in (source, *targets)}  # an unknown name: ValueError listing the known
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     normals, mask = sphere_normals(size)
     albedo = sphere_albedo(normals, mask)
-    maps = {name: envmap.read(HDRI_DIR / f"{name}.exr") for name in (source, *targets)}
+    maps = {name: envmap.read(path) for name, path in paths.items()}
     turned = f"{source} turned 120 deg"
     maps[turned] = envmap.rotate(maps[source], rotations.about_y(120.0)).astype(np.float32)
     target_names = [*targets, turned]

@@ -24,6 +24,8 @@ import warnings
 from pathlib import Path
 from types import ModuleType
 
+from physrelight.cli_common import MissingSetup  # a RuntimeError: one line from the command line
+
 MIN_LLVM = 16
 DIFFERENTIABLE_VARIANT = "llvm_ad_rgb"
 FALLBACK_VARIANT = "scalar_rgb"
@@ -70,7 +72,7 @@ def find_llvm() -> Path | None:
     return Path(max(candidates)[1])
 
 
-_INSTALL_HINT = ("install Debian's libllvm19 (apt-get install libllvm19; `make setup` does it) "
+_INSTALL_HINT = ("install Debian's libllvm19 (apt-get install libllvm19; `bash scripts/setup.sh` does it) "
                  "or set DRJIT_LIBLLVM_PATH to a libLLVM >= 16")
 
 
@@ -78,7 +80,8 @@ def load_mitsuba(differentiable: bool = False) -> ModuleType:
     """Import mitsuba with the best variant this machine supports and return the module.
 
     Args:
-        differentiable: require ``llvm_ad_rgb``; raise ``RuntimeError`` if it cannot be had.
+        differentiable: require ``llvm_ad_rgb``; raise :class:`physrelight.cli_common.MissingSetup` (a
+            ``RuntimeError``) if it cannot be had.
 
     The variant is chosen once per process: a later call that needs gradients after a
     scalar fallback raises rather than silently switching.
@@ -88,7 +91,7 @@ def load_mitsuba(differentiable: bool = False) -> ModuleType:
         current = mi.variant()
         if current is not None:
             if differentiable and current != DIFFERENTIABLE_VARIANT:
-                raise RuntimeError(
+                raise MissingSetup(
                     f"differentiable rendering needs Mitsuba's {DIFFERENTIABLE_VARIANT}, but this process "
                     f"runs {current} (no LLVM >= {MIN_LLVM} was found): {_INSTALL_HINT}"
                 )
@@ -107,7 +110,8 @@ def load_mitsuba(differentiable: bool = False) -> ModuleType:
     else:
         reason = f"no LLVM >= {MIN_LLVM} shared library found"
     if differentiable:
-        raise RuntimeError(f"differentiable rendering needs Mitsuba's {DIFFERENTIABLE_VARIANT}: {reason}; {_INSTALL_HINT}")
+        raise MissingSetup(f"differentiable rendering needs Mitsuba's {DIFFERENTIABLE_VARIANT}: {reason}; "
+                           f"{_INSTALL_HINT}")
     warnings.warn(f"{reason}; falling back to {FALLBACK_VARIANT} (slower, not differentiable)", stacklevel=2)
     mi.set_variant(FALLBACK_VARIANT)
     return mi

@@ -58,4 +58,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="degrade the MVS depth from geometry at this many times the photo's resolution "
                         "(every other file is unchanged; at most 4)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(handler=_handler)
+    p.set_defaults(handler=_handler, output_folders=("output",))

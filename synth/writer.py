@@ -29,7 +29,12 @@ covers more of the scene at the photo's resolution (``learned.data.pooled_mvs_no
 
 A scene is rendered into ``OUT/.scene_0000.partial`` and renamed when complete, so a
 killed run loses at most the scene in progress and never leaves a half-written scene
-looking finished; a restarted run skips finished scenes. The same configuration gives the
+looking finished; a restarted run skips finished scenes. Before anything is made, the run is checked
+(:func:`check_run`): every map of the ``hdri`` kind is read and validated, and a scene's estimated memory
+(:func:`scene_bytes`) must fit in the available memory. A run that fails (an error, Ctrl-C) leaves nothing of
+itself behind: the scene in progress's ``.partial`` folder is removed, and so are the manifest and the folder when
+this run made them and no finished scene is there; the progress bar is closed first, so the error is a line of
+its own. The same configuration gives the
 same bytes in every file but ``timing.json``. Shards (``i/n``) take scenes ``i, i+n, ...``
 so several machines can render one dataset into one folder. A scene depends on the
 configuration and its index only, not on how many scenes there are (``scene.json`` records
@@ -39,6 +44,7 @@ larger ``--scenes`` render the new scenes into the same folder.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import shutil
 import time
@@ -158,9 +164,65 @@ def _check_manifest(out: Path, config: SynthConfig) -> None:
     io.write_json(path, want)  # new, or grown: the scenes it already has are those of the larger one
 
 
+SCENE_BYTES_PER_PIXEL = 600
+"""Peak memory of rendering one scene, bytes per pixel (of ``res**2``, the MVS pass's ``(mvs_scale * res)**2``
+counted too), the size-dependent part only: Mitsuba's films and wavefronts, the G-buffer and MVS arrays, the photo.
+Measured as the process's peak resident memory (``ru_maxrss``) of a 1-view, 1-lighting scene at 512 and 1024 px
+minus that at 64 px, per added pixel: 540 and 547 bytes (this CPU, Mitsuba 3.9 llvm_ad_rgb; 64 spp instead of 1
+at 256 px did not raise it: the samples run in passes); rounded up."""
+SCENE_BASE_BYTES = 600 << 20
+"""What a render process holds whatever the size (Python, torch, Mitsuba's JIT): 550-580 MiB measured at 64 px."""
+
+
+def scene_bytes(config: SynthConfig) -> int:
+    """Estimated peak memory of rendering one scene of ``config`` (:data:`SCENE_BASE_BYTES` plus
+    :data:`SCENE_BYTES_PER_PIXEL` per pixel of the photo and of the MVS pass)."""
+    pixels = config.res**2 + (0 if config.mvs_scale == 1 else (config.mvs_scale * config.res) ** 2)
+    return SCENE_BASE_BYTES + SCENE_BYTES_PER_PIXEL * pixels
+
+
+def check_hdris(config: SynthConfig) -> list[Path]:
+    """Read and validate every map the ``hdri`` kind may draw (:func:`synth.lighting.list_hdris`), before any
+    work: a truncated file, a non-image or a map that is not a finite, non-negative 2:1 lat-long RGB image is a
+    ``ValueError`` naming the file. Returns the maps ([] when ``hdri`` is not among the kinds)."""
+    if "hdri" not in config.kinds:
+        return []
+    import torch
+
+    from physrelight import envmap
+
+    from .lighting import list_hdris
+
+    maps = list_hdris(config.hdri_dir)
+    for path in maps:
+        try:
+            env = envmap.read(path)
+            envmap.check_envmap(torch.from_numpy(np.asarray(env, dtype=np.float32)), f"HDRI map {str(path)!r}")
+        except ValueError:
+            raise
+        except Exception as err:  # noqa: BLE001 - OpenEXR reports a broken file as OSError or RuntimeError
+            raise ValueError(f"cannot read HDRI map {str(path)!r}: {err}") from None
+    return maps
+
+
+def check_run(config: SynthConfig) -> None:
+    """Refuse, before anything is made, a run that cannot finish: a bad input map (:func:`check_hdris`) or a
+    scene that needs more memory than there is (:func:`scene_bytes`)."""
+    from physrelight.cli_common import check_fits_in_memory
+
+    check_fits_in_memory(scene_bytes(config),
+                         f"rendering one {config.res} x {config.res} scene"
+                         + (f" (MVS pass {config.mvs_scale * config.res} px)" if config.mvs_scale > 1 else ""))
+    check_hdris(config)
+
+
 def write_dataset(out: str | Path, config: SynthConfig, shard: tuple[int, int] = (0, 1),
                   progress: bool = True) -> dict:
-    """Render the dataset's scenes of ``shard`` into ``out`` (resumable).
+    """Render the dataset's scenes of ``shard`` into ``out`` (resumable; checked first by :func:`check_run`).
+
+    On failure nothing this run made is left: the scene in progress's ``.partial`` folder, and the manifest
+    and the folder when this run made them and no finished scene is there (the error is re-raised after the
+    progress bar is closed).
 
     Returns:
         ``{"rendered": [...], "skipped": [...], "seconds": float}``.
@@ -170,25 +232,50 @@ def write_dataset(out: str | Path, config: SynthConfig, shard: tuple[int, int] =
     root = Path(out)
     if root.exists() and not root.is_dir():
         raise ValueError(f"output {str(root)!r} exists and is not a folder; give a dataset folder")
+    check_run(config)
+    made_root = not root.exists()
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as err:  # e.g. a file where a parent folder should be
         raise ValueError(f"cannot make dataset folder {str(root)!r}: {err.strerror}") from None
-    _check_manifest(root, config)
-    todo = shard_scenes(config, shard)
-    done = [i for i in todo if (root / scene_name(i) / "scene.json").is_file()]
-    pending = [i for i in todo if i not in done]
-    units = len(pending) * config.views * config.lights
-    t0 = time.perf_counter()
-    bar = tqdm(total=units, unit="view-light", disable=not progress, dynamic_ncols=True,
-               desc=f"synth {len(done)}/{len(todo)} scenes done")
-    for index in pending:
-        bar.set_postfix_str(scene_name(index))
-        write_scene(root, index, config, on_unit=lambda: bar.update(1))
-        bar.set_description(f"synth {todo.index(index) + 1}/{len(todo)} scenes")
+    made_manifest = not (root / "manifest.json").exists()
+    bar = None
+    current: list[int] = []
+    try:
+        _check_manifest(root, config)
+        todo = shard_scenes(config, shard)
+        done = [i for i in todo if (root / scene_name(i) / "scene.json").is_file()]
+        pending = [i for i in todo if i not in done]
+        units = len(pending) * config.views * config.lights
+        t0 = time.perf_counter()
+        bar = tqdm(total=units, unit="view-light", disable=not progress, dynamic_ncols=True,
+                   desc=f"synth {len(done)}/{len(todo)} scenes done")
+        for index in pending:
+            current[:] = [index]
+            bar.set_postfix_str(scene_name(index))
+            write_scene(root, index, config, on_unit=lambda: bar.update(1))
+            bar.set_description(f"synth {todo.index(index) + 1}/{len(todo)} scenes")
+        current.clear()
+    except BaseException:
+        if bar is not None:
+            bar.close()  # the error that follows gets a line of its own
+        _clean_failed_run(root, current, made_root, made_manifest)
+        raise
     bar.close()
     return {"rendered": [scene_name(i) for i in pending], "skipped": [scene_name(i) for i in done],
             "seconds": time.perf_counter() - t0}
+
+
+def _clean_failed_run(root: Path, current: list[int], made_root: bool, made_manifest: bool) -> None:
+    """After a failure: remove the scene in progress's ``.partial`` folder; the manifest when this run wrote it
+    and no finished scene needs it; the folder when this run made it and it is empty."""
+    for index in current:
+        shutil.rmtree(root / f".{scene_name(index)}.partial", ignore_errors=True)
+    if made_manifest and not list(finished_scenes(root)):
+        (root / "manifest.json").unlink(missing_ok=True)
+    if made_root:
+        with contextlib.suppress(OSError):  # not empty: something else is there
+            root.rmdir()
 
 
 def scene_inputs(config: SynthConfig, index: int) -> tuple[int, Any, list[Any], list[Any]]:

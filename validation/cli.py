@@ -55,4 +55,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--checks", nargs="+", metavar="CHECK",
                    help=f"run only these checks (numbers 1-{len(CHECKS)} or names such as sh_model)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
-    p.set_defaults(handler=_handler)
+    p.set_defaults(handler=_handler, output_folders=("output",))

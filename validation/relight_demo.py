@@ -12,6 +12,12 @@ image), ``quotient`` (the photo times the ratio of target to estimated source sh
 target SH shading) and ``identity`` (the photo unchanged). A real photo that ships with
 scikit-image (``rocket.jpg``) is relit too (no ground truth: for the eye).
 
+The panel shows each relit photo with the target's own sky painted in, as ``physrelight relight`` paints it
+(:func:`learned.relighter.target_sky`: the target's sky map seen through the scene's camera, in the photo's
+exposure), so the sky says which lighting the foreground was relit to, and beside each method its error
+against the path-traced target: ``|relit - target|`` luminance of the display values, one colour scale for
+every error map of the panel, with its colour bar. The scores (l1, PSNR, SSIM) are on the foreground only.
+
 Outputs: ``relight_demo.png`` (panel), ``relight_metrics.json``, ``relight_metrics.md``.
 """
 
@@ -25,11 +31,13 @@ import numpy as np
 import torch
 
 from physrelight import colour, io, metrics
+from physrelight.data import hdri
 
-__all__ = ["METHODS", "run"]
+__all__ = ["METHODS", "PANEL_METHODS", "error_map", "panel_figure", "run", "with_target_sky"]
 
 METHODS = ("proposed", "quotient", "lambertian_sh", "identity")
-HDRI_DIR = Path(__file__).resolve().parents[1] / "physrelight" / "data" / "hdri"
+PANEL_METHODS = ("proposed", "quotient")
+"""The methods the panel shows, each with its error map."""
 
 
 def _chw(x: np.ndarray) -> torch.Tensor:
@@ -45,7 +53,7 @@ def _scene(seed: int, size: int, spp: int, log: Callable[[str], None]) -> dict:
     cam = cameras.sample_views(spec, 1, seed=seed, width=size, height=size)[0]
     w2c = np.asarray(cam.world_to_camera, dtype=np.float64)
     source = lighting.sunsky(seed, elevation_deg=45.0, azimuth_deg=60.0, turbidity=3.0)
-    forest = lighting.hdri(HDRI_DIR / "forest.exr", azimuth_deg=120.0)
+    forest = lighting.hdri(hdri("forest"), azimuth_deg=120.0)
     # The HDRI is in its own units: scale it to the source's DC luminance (the same overall
     # light level), so the target photographed at the source's exposure is not blown out.
     lum = np.asarray(colour.LUMINANCE)
@@ -54,9 +62,9 @@ def _scene(seed: int, size: int, spp: int, log: Callable[[str], None]) -> dict:
         "clear sky, sun 45 deg (source)": source,
         "evening sun 8 deg": lighting.evening(seed + 1, elevation_deg=8.0, azimuth_deg=250.0),
         "hazy sky, no sun": lighting.overcast(seed + 2),
-        "forest HDRI turned 120 deg": lighting.hdri(HDRI_DIR / "forest.exr", azimuth_deg=120.0, scale=k),
+        "forest HDRI turned 120 deg": lighting.hdri(hdri("forest"), azimuth_deg=120.0, scale=k),
     }
-    out: dict = {"lights": {}, "camera": w2c}
+    out: dict = {"lights": {}, "camera": w2c, "K": np.asarray(cam.K, dtype=np.float64)}
     for k, (name, light) in enumerate(lights.items()):
         log(f"  path tracing {name!r} ({size}x{size}, {spp} spp)")
         mi_scene = render.build_scene(spec, [cam], light, spp=spp, seed=seed)
@@ -65,10 +73,35 @@ def _scene(seed: int, size: int, spp: int, log: Callable[[str], None]) -> dict:
             out["sky"] = geo.sky_mask
             out["foreground"] = ~geo.sky_mask & (np.linalg.norm(geo.normal, axis=-1) > 0.5)
         radiance = render.render_radiance(mi_scene, 0, spp=spp, seed=seed + 17 * k)
-        out["lights"][name] = {"radiance": radiance, "sh": light.sh(2, w2c)}
+        out["lights"][name] = {"radiance": radiance, "sh": light.sh(2, w2c), "sky_map": light.sky}
     src = next(iter(out["lights"]))
     out["ev"] = metered_ev(out["lights"][src]["radiance"])
     return out
+
+
+def with_target_sky(display: torch.Tensor, sky: np.ndarray, sky_map: np.ndarray, K: np.ndarray,
+                    world_to_camera: np.ndarray, gain: float) -> torch.Tensor:
+    """``(1, 3, H, W)`` display values ``display`` with the target's sky on ``sky (H, W)`` bool: the lat-long
+    ``sky_map (h, 2h, 3)`` (world frame, target radiance) seen through the camera (``K (3, 3)``,
+    ``world_to_camera (4, 4)``) by :func:`learned.relighter.target_sky`, as ``physrelight relight`` paints a
+    target's sky, times the photo's exposure ``gain``, to display values."""
+    from learned.relighter import target_sky
+
+    h, w = display.shape[-2:]
+    if sky.shape != (h, w):
+        raise ValueError(f"sky must have shape {(h, w)}, got {sky.shape}")
+    radiance = target_sky(np.asarray(sky_map, dtype=np.float32), K, world_to_camera, h, w)
+    painted = colour.to_ldr(radiance.permute(2, 0, 1)[None].float().clamp_min(0) * gain)
+    return torch.where(torch.from_numpy(sky)[None, None], painted, display)
+
+
+def error_map(relit: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """``(H, W)`` ``|relit - target|`` in luminance (Rec. 709 weights) of two ``(1, 3, H, W)`` display images."""
+    if relit.shape != target.shape or relit.ndim != 4 or relit.shape[:2] != (1, 3):
+        raise ValueError(f"relit and target must both be (1, 3, H, W), got {tuple(relit.shape)}, "
+                         f"{tuple(target.shape)}")
+    lum = relit.new_tensor(colour.LUMINANCE)[None, :, None, None]
+    return ((relit - target) * lum).sum(1)[0].abs()
 
 
 def _real_photo() -> np.ndarray | None:
@@ -95,6 +128,7 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
     photo = colour.to_ldr(_chw(src["radiance"] * gain))  # what the user has: an LDR photo
     lin = colour.from_ldr(photo)
     sky = torch.from_numpy(sc["sky"])[None, None]
+    K, w2c = sc["K"], sc["camera"]
     fg = torch.from_numpy(sc["foreground"])[None, None].float()
     relighter = Relighter.load()
 
@@ -118,13 +152,15 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
             entry[method] = {"l1": float(metrics.l1(p, target, fg)), "psnr": float(metrics.psnr(p, target, fg)),
                              "ssim": float(metrics.ssim(p, target, fg)), "seconds": seconds[method]}
         results["targets"][name] = entry
-        rows.append((name, [photo, target, preds["proposed"], preds["quotient"]]))
+        shown = {m: with_target_sky(preds[m], sc["sky"], sc["lights"][name]["sky_map"], K, w2c, gain)
+                 for m in PANEL_METHODS}
+        rows.append((name, photo, target, [(m, shown[m], error_map(shown[m], target)) for m in PANEL_METHODS]))
 
     log("[3/3] a real photo (scikit-image's rocket.jpg), no ground truth")
     real = _real_photo()
     real_row = None
     if real is not None:
-        forest = relighter.relight(real, HDRI_DIR / "forest.exr", method="proposed", exposure="auto")
+        forest = relighter.relight(real, hdri("forest"), method="proposed", exposure="auto")
         from learned.relight_cli import sun_direction
 
         low_sun = relighter.relight(real, sun_direction(10.0, 60.0), method="proposed", exposure="auto")
@@ -147,35 +183,73 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
     return results
 
 
-def _panel(path: Path, source: str, rows: list, real_row: list | None) -> None:
+def panel_figure(source: str, rows: list, real_row: list | None):
+    """The demo's panel as a matplotlib figure.
+
+    Args:
+        source: the source lighting's name (the title).
+        rows: one per target, ``(name, photo, target, [(method, relit, error), ...])``: ``(1, 3, H, W)`` display
+            images (the relit ones with the target's sky) and ``(H, W)`` error maps (:func:`error_map`).
+        real_row: ``[photo, relit, relit]`` ``(H, W, 3)`` of the real photo, or None.
+
+    Returns:
+        The figure: per target row the photo, the target, then each method and its error map, all error maps on
+        one colour scale (0 to the largest 99th percentile of them) with one colour bar.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    cols = ["photo (source)", "path-traced target", "proposed (default)", "quotient"]
+    methods = [m for m, _, _ in rows[0][3]] if rows else list(PANEL_METHODS)
+    ncols = 2 + 2 * len(methods)
+    cols = ["photo (source)", "path-traced target"]
+    for m in methods:
+        cols += [f"{m}{' (default)' if m == 'proposed' else ''}", f"|{m} - target|"]
+    errors = [e for _, _, _, ms in rows for _, _, e in ms]
+    vmax = max([float(torch.quantile(e.flatten().float(), 0.99)) for e in errors] + [1e-3])
     n = len(rows) + (1 if real_row is not None else 0)
-    fig, axes = plt.subplots(n, 4, figsize=(2.4 * 4, 2.5 * n), squeeze=False)
-    for r, (name, imgs) in enumerate(rows):
-        for c, img in enumerate(imgs):
-            axes[r, c].imshow(img[0].permute(1, 2, 0).numpy())
+    fig, axes = plt.subplots(n, ncols, figsize=(1.9 * ncols + 0.6, 2.0 * n + 0.4), squeeze=False)
+    im = None
+    for r, (name, photo, target, ms) in enumerate(rows):
+        imgs = [("rgb", photo), ("rgb", target)]
+        for _, relit, err in ms:
+            imgs += [("rgb", relit), ("err", err)]
+        for c, (kind, img) in enumerate(imgs):
+            ax = axes[r, c]
+            if kind == "rgb":
+                ax.imshow(img[0].permute(1, 2, 0).clamp(0, 1).numpy())
+            else:
+                im = ax.imshow(img.numpy(), cmap="magma", vmin=0.0, vmax=vmax)
             if r == 0:
-                axes[r, c].set_title(cols[c], fontsize=8)
+                ax.set_title(cols[c], fontsize=7)
         axes[r, 0].set_ylabel(name, fontsize=7)
     if real_row is not None:
-        titles = ["rocket.jpg", "relit: forest HDRI", "relit: sun 10 deg", ""]
-        for c in range(4):
+        titles = ["rocket.jpg", "relit: forest HDRI", "relit: sun 10 deg"]
+        for c in range(ncols):
             if c < len(real_row):
                 axes[-1, c].imshow(np.clip(real_row[c], 0, 1))
-            axes[-1, c].set_xlabel(titles[c], fontsize=8)
+                axes[-1, c].set_xlabel(titles[c], fontsize=7)
+            else:
+                axes[-1, c].axis("off")
     for ax in axes.flat:
         ax.set_xticks([])
         ax.set_yticks([])
-    if real_row is not None:
-        axes[-1, 3].axis("off")
-    fig.suptitle(f"Relighting a path-traced scene ({source}) with the shipped weights", fontsize=9)
-    fig.tight_layout()
+    fig.suptitle(f"Relighting a path-traced scene ({source}) with the shipped weights; the relit photos get the "
+                 "target's sky as physrelight relight paints it", fontsize=8)
+    fig.tight_layout(rect=(0, 0, 0.93, 1))
+    if im is not None:
+        cax = fig.add_axes((0.945, 0.35, 0.012, 0.4))
+        bar = fig.colorbar(im, cax=cax)
+        bar.set_label("|relit - target| luminance (display)", fontsize=7)
+        bar.ax.tick_params(labelsize=6)
+    return fig
+
+
+def _panel(path: Path, source: str, rows: list, real_row: list | None) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = panel_figure(source, rows, real_row)
     with io.atomic_path(path, ".png") as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
-

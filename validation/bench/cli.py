@@ -92,8 +92,66 @@ def _real(args: argparse.Namespace, command: str, progress) -> int:
     return 0
 
 
+# Which options each mode reads (dest -> the flag as typed); any other given option would be ignored: refused.
+_MODE_OPTIONS = {
+    "synthetic": ("quick", "full", "data", "runs", "no_abs"),
+    "real": ("quick", "full", "hdri_dir", "fov", "seed"),
+    "full_resolution": ("data", "native_data"),
+}
+_DEFAULT_FOV = (45.0, 75.0)
+ABS_LABEL = "mitsuba_analysis_by_synthesis"
+
+
+def _given(args: argparse.Namespace, dest: str) -> bool:
+    """Whether option ``dest`` was on the command line (its parser default is None or False)."""
+    return getattr(args, dest) not in (None, False)
+
+
+def check_mode_options(args: argparse.Namespace) -> str:
+    """The mode (``synthetic``, ``real``, ``full_resolution``) after refusing, before any work, an option that
+    mode does not read (e.g. ``--fov`` without ``--real``, which a 5-minute synthetic bench would ignore)."""
+    if args.real and args.full_resolution:
+        raise ValueError("--real and --full-resolution are two different benches: give one")
+    mode = "real" if args.real else "full_resolution" if args.full_resolution else "synthetic"
+    flags = {d: "--" + d.replace("_", "-") for ds in _MODE_OPTIONS.values() for d in ds}
+    for dest, flag in flags.items():
+        if dest not in _MODE_OPTIONS[mode] and _given(args, dest):
+            owners = [m for m, ds in _MODE_OPTIONS.items() if dest in ds]
+            goes = " or ".join({"synthetic": "the synthetic bench (no --real)", "real": "--real",
+                                "full_resolution": "--full-resolution"}[m] for m in owners)
+            here = {"synthetic": "the synthetic bench", "real": "--real",
+                    "full_resolution": "--full-resolution"}[mode]
+            raise ValueError(f"{flag} goes with {goes}; {here} does not read it")
+    return mode
+
+
+def check_llvm(with_abs: bool) -> None:
+    """Refuse, before any work, a synthetic bench with the analysis-by-synthesis baseline on a machine without
+    an LLVM >= 16 library (Mitsuba's differentiable variant needs one; :func:`synth.backend.find_llvm`)."""
+    if not with_abs:
+        return
+    from physrelight.cli_common import SETUP_COMMAND, MissingSetup
+    from synth import backend
+
+    if backend.find_llvm() is None:
+        raise MissingSetup(f"the bench's {ABS_LABEL} baseline needs Mitsuba's {backend.DIFFERENTIABLE_VARIANT} and "
+                           f"no LLVM >= {backend.MIN_LLVM} library was found: run `{SETUP_COMMAND}` (it installs "
+                           "libllvm19) or set DRJIT_LIBLLVM_PATH to a libLLVM >= 16; or skip that baseline with "
+                           "--no-abs")
+
+
 def _handler(args: argparse.Namespace) -> int:
     from .run import LEVELS, run_bench
+
+    mode = check_mode_options(args)
+    if args.fov is None:
+        args.fov = list(_DEFAULT_FOV)
+    if args.seed is None:
+        args.seed = 0
+    if args.runs is None:
+        args.runs = "runs"
+    if mode == "synthetic":
+        check_llvm(not args.no_abs)
 
     words = ["physrelight", "bench", "--full" if args.full else "--quick"]
     progress = (lambda msg: None) if args.quiet else (lambda msg: print(msg, flush=True))
@@ -109,7 +167,7 @@ def _handler(args: argparse.Namespace) -> int:
         words.insert(2, "--real")
         if args.hdri_dir is not None:
             words += ["--hdri-dir", args.hdri_dir]
-        if tuple(args.fov) != (45.0, 75.0):
+        if tuple(args.fov) != _DEFAULT_FOV:
             words += ["--fov", f"{args.fov[0]:g}", f"{args.fov[1]:g}"]
         if args.seed != 0:
             words += ["--seed", str(args.seed)]
@@ -117,8 +175,6 @@ def _handler(args: argparse.Namespace) -> int:
         if args.weights is not None:
             words += ["--weights", args.weights]
         return _real(args, " ".join(shlex.quote(w) for w in words), progress)
-    if args.hdri_dir is not None:
-        raise ValueError("--hdri-dir goes with --real (the synthetic bench takes --data)")
     level = LEVELS["full" if args.full else "quick"]
     if args.data:
         words += ["--data", args.data]
@@ -153,7 +209,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "(default: --quick renders its own, --full reads data/heldout)")
     p.add_argument("-o", "--output", default="out/bench", help="report folder (default: out/bench)")
     p.add_argument("--threads", type=positive_int, default=2, help="torch threads while timing (default 2)")
-    p.add_argument("--runs", default="runs", metavar="DIR",
+    p.add_argument("--runs", default=None, metavar="DIR",  # None: not given (check_mode_options), then "runs"
                    help="where the width sweep finds runs/width_4, width_8, width_16 (default: runs)")
     p.add_argument("--no-abs", action="store_true", help="skip the (slow) analysis-by-synthesis baseline")
     p.add_argument("--weights", default=None, metavar="DIR",
@@ -161,9 +217,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--real", action="store_true", help="real photos: crops of real HDR panoramas (see above)")
     p.add_argument("--hdri-dir", default=None, metavar="DIR",
                    help="with --real: a folder of lat-long .exr/.hdr panoramas to score (default: the shipped ones)")
-    p.add_argument("--fov", nargs=2, type=float, default=[45.0, 75.0], metavar=("LO", "HI"),
+    p.add_argument("--fov", nargs=2, type=float, default=None, metavar=("LO", "HI"),
                    help="with --real: the crops' horizontal field of view range in degrees (default: 45 75)")
-    p.add_argument("--seed", type=int, default=0, help="with --real: crops, photo noise and SkyGAN noise (default 0)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="with --real: crops, photo noise and SkyGAN noise (default 0)")
     p.add_argument("--full-resolution", action="store_true",
                    help="relit l1 and halo error at depth edges of a synth folder rendered at 256 px (--data, default "
                         "data/heldout256): working at 64 px with bilinear or guided transfer, or at 256 px "
@@ -177,4 +234,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --timelapse: a seeded subset (--seed) of N ordered frame pairs per sequence "
                         "(default: all)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
-    p.set_defaults(handler=_handler)
+    p.set_defaults(handler=_handler, output_folders=("output",))
