@@ -305,7 +305,10 @@ def batch_stream(sampler: Any, batch_size: int, start: int, steps: int, rank: in
     pin = device.type == "cuda"
     loader = torch.utils.data.DataLoader(StepBatches(sampler, batch_size, start, steps, rank), batch_size=None,
                                          shuffle=False, num_workers=workers, pin_memory=pin,
-                                         worker_init_fn=_one_thread, prefetch_factor=2)
+                                         worker_init_fn=_one_thread, prefetch_factor=2,
+                                         # its own generator: the workers' base seed is not drawn from the
+                                         # global RNG, whose state the checkpoints carry
+                                         generator=torch.Generator().manual_seed(0))
     for item in loader:
         item["keys"] = [tuple(k) for k in item["keys"]]  # the loader's collation makes tuples lists
         yield batch_to(Batch(**item), device, non_blocking=pin)
