@@ -27,6 +27,7 @@ the validation (``mode="full"``) on the validation split (or ``--val-data``).
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 import time
@@ -227,8 +228,6 @@ def _cpu_copy(model: torch.nn.Module) -> torch.nn.Module:
     first = next(model.parameters(), None)
     if first is None or first.device.type == "cpu":
         return model
-    import copy
-
     return copy.deepcopy(model).cpu()
 
 
