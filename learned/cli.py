@@ -83,8 +83,8 @@ def _compute_options(p: argparse.ArgumentParser) -> None:
                    help="where to train: auto = cuda if available, else mps, else cpu (default: auto); a run "
                         "resumes on any device")
     p.add_argument("--precision", choices=("fp32", "bf16", "fp16"), default="fp32",
-                   help="fp32 (default), or the networks under autocast in bf16 or fp16 (fp16 with a loss scaler; "
-                        "CUDA/MPS only); losses and the lighting solve stay float32/float64")
+                   help="fp32 (default), or the networks under autocast in bf16 or fp16 (fp16 with a loss scaler); "
+                        "losses and the lighting solve stay float32/float64; refused where this torch cannot run it")
     p.add_argument("--workers", type=int, default=0, metavar="N",
                    help="DataLoader processes making the batches, pinned memory on CUDA (default: 0 = in this "
                         "process); the same batches either way")

@@ -178,29 +178,29 @@ def resolve_device(device: str, local_rank: int | None = None) -> torch.device:
 
 
 def _amp_works(device: torch.device, dtype: torch.dtype) -> bool:
-    """Whether autocast to ``dtype`` on ``device`` runs a convolution in that dtype (a probe, not a guess)."""
+    """Whether autocast to ``dtype`` on ``device`` runs a convolution in that dtype and, for fp16, a
+    loss scaler exists for the device (a probe, not a guess from version numbers)."""
     try:
         conv = torch.nn.Conv2d(3, 4, 3).to(device)
         with torch.autocast(device.type, dtype=dtype):
             y = conv(torch.ones(1, 3, 8, 8, device=device))
+        if dtype == torch.float16:
+            torch.amp.GradScaler(device.type)
         return y.dtype == dtype
-    except (RuntimeError, TypeError, ValueError):
+    except (RuntimeError, TypeError, ValueError, AssertionError):
         return False
 
 
 def check_compute(device: torch.device, precision: str) -> None:
-    """``ValueError`` naming the combination unless ``precision`` runs on ``device``.
-
-    fp16 needs loss scaling (:func:`grad_scaler`), offered here on CUDA and MPS only: on the CPU
-    fp16 is refused (use bf16, whose exponent range needs no scaling)."""
+    """``ValueError`` naming the combination unless ``precision`` runs on ``device`` with this torch
+    (e.g. fp16 on a CPU whose torch has no fp16 autocast or CPU loss scaler)."""
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
     if precision == "fp32":
         return
-    if precision == "fp16" and device.type == "cpu":
-        raise ValueError("--precision fp16 is not supported on the CPU (no loss scaling there); use bf16 or fp32")
     if not _amp_works(device, _AMP_DTYPES[precision]):
-        raise ValueError(f"--precision {precision}: autocast to {_AMP_DTYPES[precision]} does not run on "
+        what = "autocast and loss scaling" if precision == "fp16" else "autocast"
+        raise ValueError(f"--precision {precision}: {what} in {_AMP_DTYPES[precision]} does not run on "
                          f"{device} with torch {torch.__version__}; use fp32")
 
 

@@ -81,9 +81,11 @@ def test_03_bad_input_is_one_line_on_stderr_and_exit_2(tiny_dataset: Path, tmp_p
 
     cases = [("--data", str(tmp_path / "none")),
              ("--data", str(tiny_dataset), "--steps", "4", "--resume-at", "4"),
-             ("--data", str(tiny_dataset), "--device", "cpu", "--precision", "fp16")]
+             ("--data", str(tiny_dataset), "--device", "cpu", "--workers", "-1")]
     if not torch.cuda.is_available():
         cases.append(("--data", str(tiny_dataset)))  # the default device is cuda
+    if not (getattr(torch.backends, "mps", None) and torch.backends.mps.is_available()):
+        cases.append(("--data", str(tiny_dataset), "--device", "mps"))
     for args in cases:
         proc = sh(*args)
         assert proc.returncode == 2, (args, proc.stderr)
