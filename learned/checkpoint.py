@@ -3,9 +3,15 @@
 ``RUN/checkpoints/step_XXXXXXX.safetensors`` holds the model (``model.*``), the Adam
 state (``optim.<param index>.<exp_avg|exp_avg_sq|step>``; with several optimizers, as for a
 GAN's generator and discriminator, ``optim.<name>.<param index>.<...>``) and the torch RNG state
-(``rng.torch``); ``step_XXXXXXX.json`` holds the step, the configuration, the optimizer's
-param groups and anything else JSON-able. The sidecar is written last and its presence
+(``rng.torch``; a run on a GPU adds that GPU's ``rng.cuda``); ``step_XXXXXXX.json`` holds the step,
+the configuration, the optimizer's param groups, an fp16 run's loss-scaler state (``grad_scaler``)
+and anything else JSON-able. The sidecar is written last and its presence
 marks a checkpoint complete, so a run killed while saving resumes from the previous one.
+
+Tensors are stored device-free (moved to the CPU on save) and land on the device of the model and
+optimizer they are loaded into, so a run saved on CUDA resumes on the CPU and the reverse. The CUDA
+RNG state is per device: restored when the checkpoint has one and the run resumes on a GPU, left
+as seeded otherwise (the loops draw no random numbers on the GPU).
 
 Shipped weights (:func:`export_weights`) are the model tensors only, with the network's
 hyperparameters in the safetensors metadata.
@@ -47,6 +53,7 @@ def _atomic_write_json(data: Any, path: Path) -> None:
 
 
 Optimizers = torch.optim.Optimizer | dict[str, torch.optim.Optimizer]
+Scalers = dict[str, "torch.amp.GradScaler"]
 
 
 def _named(optimizer: Optimizers) -> dict[str, torch.optim.Optimizer]:
@@ -59,10 +66,13 @@ def _named(optimizer: Optimizers) -> dict[str, torch.optim.Optimizer]:
 
 
 def save_checkpoint(run: str | Path, step: int, model: torch.nn.Module, optimizer: Optimizers,
-                    extra: dict[str, Any]) -> Path:
+                    extra: dict[str, Any], scalers: Scalers | None = None,
+                    device: torch.device | str | None = None) -> Path:
     """Write the checkpoint of ``step`` (optimizer steps done) into ``run/checkpoints``; return the sidecar path.
 
-    ``optimizer`` is one optimizer or a dict ``{name: optimizer}`` (e.g. ``{"g": ..., "d": ...}``).
+    ``optimizer`` is one optimizer or a dict ``{name: optimizer}`` (e.g. ``{"g": ..., "d": ...}``);
+    ``scalers`` the fp16 loss scalers by the same names (None: no loss scaling); ``device`` where the
+    run computes (a CUDA device adds its RNG state).
     """
     d = Path(run) / "checkpoints"
     d.mkdir(parents=True, exist_ok=True)
@@ -76,8 +86,12 @@ def save_checkpoint(run: str | Path, step: int, model: torch.nn.Module, optimize
                 tensors[f"{prefix}{pid}.{key}"] = value if isinstance(value, torch.Tensor) else torch.tensor(value)
         groups[name] = opt["param_groups"]
     tensors["rng.torch"] = torch.get_rng_state()
+    if device is not None and torch.device(device).type == "cuda":
+        tensors["rng.cuda"] = torch.cuda.get_rng_state(torch.device(device))
     _atomic_save_tensors(tensors, d / f"step_{step:07d}.safetensors")
     sidecar = {"step": step, "param_groups": groups[""] if "" in groups else groups, **extra}
+    if scalers:
+        sidecar["grad_scaler"] = {name: sc.state_dict() for name, sc in scalers.items()}
     path = d / f"step_{step:07d}.json"
     _atomic_write_json(sidecar, path)
     return path
@@ -151,14 +165,25 @@ def _averaged_tensors(sidecars: list[Path], head: str) -> dict[str, torch.Tensor
 
 
 def load_checkpoint(sidecar: str | Path, model: torch.nn.Module | None = None,
-                    optimizer: Optimizers | None = None, restore_rng: bool = True) -> dict[str, Any]:
+                    optimizer: Optimizers | None = None, restore_rng: bool = True,
+                    scalers: Scalers | None = None, map_location: torch.device | str | None = None) -> dict[str, Any]:
     """Load a checkpoint into ``model``/``optimizer`` (either may be None; ``optimizer`` as given
-    to :func:`save_checkpoint`); return the sidecar dict."""
+    to :func:`save_checkpoint`); return the sidecar dict.
+
+    ``map_location``: the device the run resumes on (None: the CPU), where ``model`` and the
+    optimizer's parameters already are; the tensors land there, and a CUDA RNG state is restored
+    only on a CUDA device. ``scalers``: fp16 loss scalers by optimizer
+    name, given the checkpoint's state when it has one (a run saved without fp16 leaves them fresh).
+    """
     sidecar = Path(sidecar)
     if not sidecar.is_file():
         raise FileNotFoundError(f"no checkpoint sidecar at {str(sidecar)!r}")
     meta = json.loads(sidecar.read_text())
     tensors = load_file(str(sidecar.with_suffix(".safetensors")))
+    rng = {k: tensors.pop(k) for k in [k for k in tensors if k.startswith("rng.")]}
+    target = torch.device(map_location) if map_location is not None else torch.device("cpu")
+    # Read on the CPU: load_state_dict copies into the parameters wherever they live, and the optimizer
+    # moves its state to its parameters' device (its step counters stay on the CPU, as torch keeps them).
     if model is not None:
         model.load_state_dict({k[6:]: v for k, v in tensors.items() if k.startswith("model.")})
     if optimizer is not None:
@@ -175,8 +200,14 @@ def load_checkpoint(sidecar: str | Path, model: torch.nn.Module | None = None,
             if groups is None:
                 raise ValueError(f"checkpoint {str(sidecar)!r} has no optimizer named {name!r}")
             o.load_state_dict({"state": state, "param_groups": groups})
-    if restore_rng and "rng.torch" in tensors:
-        torch.set_rng_state(tensors["rng.torch"])
+    if restore_rng and "rng.torch" in rng:
+        torch.set_rng_state(rng["rng.torch"])
+    if restore_rng and "rng.cuda" in rng and target.type == "cuda":
+        torch.cuda.set_rng_state(rng["rng.cuda"], target)
+    for name, sc in (scalers or {}).items():
+        state = meta.get("grad_scaler", {}).get(name)
+        if state:
+            sc.load_state_dict(state)
     return meta
 
 
@@ -238,17 +269,19 @@ def load_weights(path: str | Path) -> tuple[dict[str, torch.Tensor], dict[str, s
     return load_file(str(path)), meta
 
 
-def resume(run: str | Path, model: torch.nn.Module, optimizer: Optimizers, config: Any) -> tuple[int, float]:
-    """Load the latest checkpoint of ``run`` (if any) into ``model``/``optimizer`` and return
-    ``(step, train_seconds)`` to continue from (``(0, 0.0)`` for a fresh run).
+def resume(run: str | Path, model: torch.nn.Module, optimizer: Optimizers, config: Any,
+           scalers: Scalers | None = None, map_location: torch.device | str | None = None) -> tuple[int, float]:
+    """Load the latest checkpoint of ``run`` (if any) into ``model``/``optimizer`` (and fp16 ``scalers``)
+    on ``map_location`` and return ``(step, train_seconds)`` to continue from (``(0, 0.0)`` for a fresh run).
 
     ``config`` is the run's configuration dataclass: a checkpoint written under another
     configuration (compared with ``config.identity()``, the fields a resume must keep) is refused.
+    The device, precision and workers are not part of it: a run moves between machines.
     """
     side = latest_checkpoint(run)
     if side is None:
         return 0, 0.0
-    meta = load_checkpoint(side, model, optimizer)
+    meta = load_checkpoint(side, model, optimizer, scalers=scalers, map_location=map_location)
     saved = meta.get("config")
     if saved and type(config)(**{**saved, "out": config.out}).identity() != config.identity():
         raise ValueError(f"{str(run)!r} holds a run with another configuration; use another --out")

@@ -24,7 +24,9 @@ Sub-subcommands (heavy imports stay inside the handlers):
   (l1 / SSIM / PSNR / CIEDE2000 of proposed, lambertian_sh, shadownet_lambertian, identity).
 
 Re-running ``train inverse``/``train shadow`` with the same ``--out`` resumes from the
-latest checkpoint. Under ``torchrun --nproc_per_node N`` the loops run distributed (gloo).
+latest checkpoint. Under ``torchrun --nproc_per_node N`` the loops run distributed (NCCL on
+CUDA, one GPU per rank; gloo on the CPU). ``--device``, ``--precision``, ``--workers`` and
+``--preset paper`` on ``inverse``, ``shadow`` and ``renderer``: see docs/training.md.
 """
 
 from __future__ import annotations
@@ -65,10 +67,52 @@ def _write_json(path: str | None, data: dict) -> None:
         io.write_json(path, data)
 
 
+# ``--preset paper``: what Yu et al. (ECCV 2020) state of their training schedule. Only the resolution:
+# the batch size, learning rate, optimizer and iterations are not stated in the text we could read
+# (docs/training.md), so the project's defaults stand for them. Explicit flags override the preset.
+PRESETS: dict[str, dict[str, object]] = {"paper": {"res": 200}}
+
+
+def _compute_options(p: argparse.ArgumentParser) -> None:
+    """Register ``--device``, ``--precision``, ``--workers`` and ``--preset`` on a training stage's parser.
+
+    Call it after the stage's own ``set_defaults``: the options a preset sets get a ``None`` default
+    (remembered in ``_preset_defaults``), so :func:`_compute_fields` can tell a flag given on the
+    command line, which wins, from one left to the preset or the stage's default."""
+    p.add_argument("--device", choices=("auto", "cpu", "cuda", "mps"), default="auto",
+                   help="where to train: auto = cuda if available, else mps, else cpu (default: auto); a run "
+                        "resumes on any device")
+    p.add_argument("--precision", choices=("fp32", "bf16", "fp16"), default="fp32",
+                   help="fp32 (default), or the networks under autocast in bf16 or fp16 (fp16 with a loss scaler); "
+                        "losses and the lighting solve stay float32/float64; refused where this torch cannot run it")
+    p.add_argument("--workers", type=int, default=0, metavar="N",
+                   help="DataLoader processes making the batches, pinned memory on CUDA (default: 0 = in this "
+                        "process); the same batches either way")
+    p.add_argument("--preset", choices=sorted(PRESETS), default=None,
+                   help="paper: the paper's stated schedule, i.e. 200 x 200 training photos (--res 200); its batch "
+                        "size, learning rate and iterations are not stated, so the defaults stand (docs/training.md). "
+                        "Explicit flags override the preset")
+    defaults = {k: p.get_default(k) for k in sorted({k for preset in PRESETS.values() for k in preset})}
+    p.set_defaults(_preset_defaults=defaults, **{k: None for k in defaults})
+
+
+def _compute_fields(args: argparse.Namespace) -> dict[str, object]:
+    """Settle the preset's options on ``args`` (a flag given explicitly is kept) and return the compute
+    fields of a run configuration: ``device``, ``precision``, ``workers``."""
+    if args.workers < 0:
+        raise ValueError(f"--workers must be >= 0, got {args.workers}")
+    preset = PRESETS.get(args.preset, {}) if args.preset else {}
+    for key, default in args._preset_defaults.items():
+        if getattr(args, key) is None:
+            setattr(args, key, preset.get(key, default))
+    return {"device": args.device, "precision": args.precision, "workers": args.workers}
+
+
 def _config(args: argparse.Namespace, stage: str):
     from .objectives import LossWeights
     from .train import TrainConfig
 
+    compute = _compute_fields(args)
     weights = _loss_weights(args.loss_weight, LossWeights().as_dict())
     return TrainConfig(stage=stage, data=args.data, out=args.out, val_data=args.val_data, val_split=args.val_split,
                        train_split=args.train_split,
@@ -81,7 +125,7 @@ def _config(args: argparse.Namespace, stage: str):
                        mvs_stencil=getattr(args, "mvs_stencil", "central"), mirror=args.mirror,
                        mvs_pooled=getattr(args, "mvs_pooled", False), degrade=getattr(args, "degrade", False),
                        degrade_under_ev=getattr(args, "degrade_under_ev", 0.0),
-                       weights=weights, progress=not args.quiet)
+                       weights=weights, progress=not args.quiet, **compute)
 
 
 def _train_inverse(args: argparse.Namespace) -> int:
@@ -298,6 +342,7 @@ def _train_renderer(args: argparse.Namespace) -> int:
     from .renderer_objectives import RendererWeights
     from .train_renderer import RendererConfig, train_renderer
 
+    compute = _compute_fields(args)
     weights = _loss_weights(args.loss_weight, RendererWeights().as_dict())
     cfg = RendererConfig(data=args.data, out=args.out, inverse=args.inverse, shadow=args.shadow, prior=args.prior,
                          val_data=args.val_data, val_split=args.val_split, train_split=args.train_split,
@@ -307,7 +352,7 @@ def _train_renderer(args: argparse.Namespace) -> int:
                          base=args.base, lr=args.lr,
                          lr_d=args.lr_d, seed=args.seed, val_every=args.val_every, val_images=args.val_images,
                          ckpt_every=args.ckpt_every, log_every=args.log_every, threads=args.threads, weights=weights,
-                         progress=not args.quiet)
+                         progress=not args.quiet, **compute)
     print(json.dumps(train_renderer(cfg), indent=1))
     return 0
 
@@ -364,6 +409,7 @@ def _add_renderer_stages(tsub: argparse._SubParsersAction) -> None:
     rn.add_argument("--d-width", type=positive_int, default=16, help="discriminator width (default: 16)")
     rn.add_argument("--lr-d", type=float, default=2e-4, help="discriminator learning rate (default: 2e-4)")
     rn.set_defaults(handler=_train_renderer, output_folders=("out",))
+    _compute_options(rn)
 
     ex = tsub.add_parser("export-renderer", help="write the renderer's weights-only safetensors")
     ex.add_argument("--run", required=True, help="renderer run folder")
@@ -418,12 +464,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="with --degrade: half the time the photo is also taken up to STOPS under-exposed (uniform) "
                           "and brought back after quantisation, as metering brings a dark photo back (default: 0)")
     inv.set_defaults(handler=_train_inverse, output_folders=("out",))
+    _compute_options(inv)
 
     sh = tsub.add_parser("shadow", help="ShadowNet on a trained inverse network")
     _common(sh)
     _mirror(sh)
     sh.add_argument("--inverse", required=True, help="inverse run folder or exported weights")
     sh.set_defaults(handler=_train_shadow, output_folders=("out",))
+    _compute_options(sh)
 
     ev = tsub.add_parser("evaluate", help="held-out metrics of weights vs trivial baselines")
     ev.add_argument("--data", required=True, help="synth dataset folder with ground truth")

@@ -118,7 +118,7 @@ def cross_targets(batch: Batch) -> tuple[torch.Tensor, torch.Tensor, torch.Tenso
     n = batch.pairs
     keys = batch.keys
     partner_keys = keys[n:] + keys[:n]
-    same = torch.tensor([k[:2] == p[:2] for k, p in zip(keys, partner_keys)])[:, None, None, None]
+    same = torch.tensor([k[:2] == p[:2] for k, p in zip(keys, partner_keys)], device=image.device)[:, None, None, None]
     # Same scene and view: the camera did not move, the photo needs no warp (and no MVS depth).
     target = torch.where(same, batch.partner(image), warped)
     mask = torch.where(same, ~sky, valid & ~sky).to(image.dtype)
@@ -219,7 +219,7 @@ def renderer_losses(renderer: NeuralRenderer, discriminator: MultiscaleDiscrimin
 def _shading_luminance(lighting: torch.Tensor, normals: torch.Tensor) -> torch.Tensor:
     """``(B, 1, H, W)`` luminance of ``shading(normals; lighting)``, clamped at 0."""
     shading = image_model.shading(normals, lighting)
-    lum = torch.tensor(colour.LUMINANCE, dtype=shading.dtype)[None, :, None, None]
+    lum = torch.tensor(colour.LUMINANCE, dtype=shading.dtype, device=shading.device)[None, :, None, None]
     return (shading * lum).sum(1, keepdim=True).clamp_min(0.0)
 
 

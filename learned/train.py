@@ -14,8 +14,12 @@
   steps, held-out scenes against ground truth: :mod:`learned.evaluate`), TensorBoard
   events in ``RUN/tb``, PNG panels of the layers in ``RUN/panels``, a progress bar;
 * **distributed** when ``WORLD_SIZE`` is set (``torchrun --nproc_per_node 2 ...``):
-  ``torch.distributed`` with gloo, DDP gradient averaging, each rank its own batches,
-  rank 0 writes logs and checkpoints.
+  ``torch.distributed`` with NCCL on CUDA (each rank its own GPU, ``cuda:LOCAL_RANK``) and gloo
+  on the CPU, DDP gradient averaging, each rank its own batches, rank 0 writes logs and checkpoints;
+* **on any device** (``device``: auto, cpu, cuda, mps) and **precision** (``precision``: fp32;
+  bf16 or fp16 autocast of the networks, fp16 with a loss scaler saved in the checkpoints), batches
+  made in the process or by ``workers`` DataLoader processes (the same batches either way;
+  :func:`learned.runs.batch_stream`). A checkpoint resumes on another device.
 
 The self-supervised loader never hands out ground truth; ground truth is read only by
 the validation (``mode="full"``) on the validation split (or ``--val-data``).
@@ -23,6 +27,7 @@ the validation (``mode="full"``) on the validation split (or ``--val-data``).
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 import time
@@ -44,6 +49,7 @@ from .lighting import load_prior
 
 from .networks import LIGHTING_SOLVES, InverseNet, ShadowNet, count_parameters, load_inverse, load_network
 from .objectives import LossWeights, decompose_and_solve, inverse_losses
+from . import runs
 from .runs import RunConfig, RunLogs, display
 
 __all__ = ["MVS_STENCILS", "TrainConfig", "train", "write_panel"]
@@ -87,12 +93,16 @@ class TrainConfig(RunConfig):
     degrade_under_ev: float = 0.0  # and, half the time, up to this many stops under-exposed, metered back
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
+    device: str = "auto"  # auto | cpu | cuda | mps (learned.runs.resolve_device)
+    precision: str = "fp32"  # fp32 | bf16 | fp16 (autocast of the networks; learned.runs.autocast)
+    workers: int = 0  # DataLoader processes making the batches (0: in this process)
 
     def __post_init__(self) -> None:
         # Runs recorded before a term existed ran without it (weight 0 = the default of any new term).
         self.weights = {**LossWeights().as_dict(), **self.weights}
         if self.stage not in STAGES:
             raise ValueError(f"stage must be one of {STAGES}, got {self.stage!r}")
+        self.check_compute_fields()
         self.check_common(("width", "depth", "res", "batch", "steps", "val_every", "val_images", "ckpt_every",
                            "log_every", "threads"), ("lr",), LossWeights().as_dict())
         if self.stage == "shadow" and self.inverse is None:
@@ -120,10 +130,18 @@ class TrainConfig(RunConfig):
 # ------------------------------------------------------------------------- distributed
 
 
-def _dist_setup() -> tuple[int, int]:
+def _local_rank() -> int | None:
+    """``LOCAL_RANK`` under torchrun (each rank's GPU), None in a plain process."""
+    return int(os.environ["LOCAL_RANK"]) if "LOCAL_RANK" in os.environ else None
+
+
+def _dist_setup(device: torch.device) -> tuple[int, int]:
+    """Join torchrun's process group (NCCL for CUDA ranks, gloo on the CPU); ``(rank, world size)``."""
     ws = int(os.environ.get("WORLD_SIZE", "1"))
     if ws > 1 and not dist.is_initialized():
-        dist.init_process_group("gloo")
+        if device.type == "cuda":
+            torch.cuda.set_device(device)
+        dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
     return (dist.get_rank(), dist.get_world_size()) if dist.is_initialized() else (0, 1)
 
 
@@ -132,11 +150,11 @@ def _barrier() -> None:
         dist.barrier()
 
 
-def _mean_terms(terms: dict[str, float], world: int) -> dict[str, float]:
+def _mean_terms(terms: dict[str, float], world: int, device: torch.device = torch.device("cpu")) -> dict[str, float]:
     if world == 1:
         return terms
     keys = sorted(terms)
-    t = torch.tensor([terms[k] for k in keys], dtype=torch.float64)
+    t = torch.tensor([terms[k] for k in keys], dtype=torch.float64, device=device)  # NCCL reduces GPU tensors only
     dist.all_reduce(t)
     return {k: float(v) / world for k, v in zip(keys, t)}
 
@@ -145,7 +163,7 @@ def _rank_divergence(model: torch.nn.Module, world: int) -> float:
     """Largest difference of any parameter between a rank and the mean over ranks (0 = in sync)."""
     if world == 1:
         return 0.0
-    flat = torch.cat([p.detach().reshape(-1).double() for p in model.parameters()])
+    flat = torch.cat([p.detach().reshape(-1).double() for p in model.parameters()])  # on the model's device
     mean = flat.clone()
     dist.all_reduce(mean)
     diff = (flat - mean / world).abs().max().reshape(1)
@@ -186,15 +204,18 @@ def _warm_start(model: torch.nn.Module, config: TrainConfig) -> None:
 def train(config: TrainConfig) -> dict[str, Any]:
     """Run (or resume) a training run; return the last validation metrics and timings.
 
-    Under ``torchrun`` the gloo process group is created here and destroyed before returning: a group left
-    to interpreter shutdown can abort a rank ("terminate called without an active exception") after all
-    its work is done, which fails the whole launch.
+    Under ``torchrun`` the process group (NCCL on CUDA, gloo on the CPU) is created here and destroyed
+    before returning: a group left to interpreter shutdown can abort a rank ("terminate called without
+    an active exception") after all its work is done, which fails the whole launch. An unavailable
+    device or precision is a ``ValueError`` before anything is written.
     """
     torch.set_num_threads(config.threads)
+    device = runs.resolve_device(config.device, _local_rank())
+    runs.check_compute(device, config.precision)
     owns_group = not dist.is_initialized()
-    rank, world = _dist_setup()
+    rank, world = _dist_setup(device)
     try:
-        result = _train(config, rank, world)
+        result = _train(config, rank, world, device)
         _barrier()  # no rank tears the group down while another still talks to it
         return result
     finally:
@@ -202,7 +223,15 @@ def train(config: TrainConfig) -> dict[str, Any]:
             dist.destroy_process_group()
 
 
-def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
+def _cpu_copy(model: torch.nn.Module) -> torch.nn.Module:
+    """``model`` itself on the CPU, else a CPU copy of it (validation and panels run on the CPU)."""
+    first = next(model.parameters(), None)
+    if first is None or first.device.type == "cpu":
+        return model
+    return copy.deepcopy(model).cpu()
+
+
+def _train(config: TrainConfig, rank: int, world: int, device: torch.device) -> dict[str, Any]:
     run = Path(config.out)
     if rank == 0:
         (run / "panels").mkdir(parents=True, exist_ok=True)
@@ -225,19 +254,31 @@ def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
             p.requires_grad_(False)
     if config.init is not None:
         _warm_start(model, config)
+    # Initialised on the CPU from the seed, then moved: the same initial weights on every device.
+    model.to(device)
+    if teacher is not None:
+        teacher.to(device)
     opt = torch.optim.Adam(model.parameters(), lr=config.lr)
+    scaler = runs.grad_scaler(device, config.precision)
+    scalers = {"": scaler} if scaler is not None else None
 
     # A checkpoint of this run, if any, replaces the warm start (resume to the same numbers).
-    start, seconds = ckpt.resume(run, model, opt, config)
+    start, seconds = ckpt.resume(run, model, opt, config, scalers=scalers, map_location=device)
     if start >= config.steps:
         if rank == 0:
             print(f"{run}: already at step {start} >= {config.steps}")
         return {"step": start, "train_seconds": seconds}
 
-    net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
+    if world > 1:
+        net = torch.nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda"
+                                                        else None)
+    else:
+        net = model
+    fwd = runs.autocast(net, device, config.precision)
+    teacher_fwd = runs.autocast(teacher, device, config.precision) if teacher is not None else None
     logs = RunLogs(run, start, rank == 0)
     if rank == 0 and start == 0:
-        io.write_json(run / "config.json", {**asdict(config), "world_size": world,
+        io.write_json(run / "config.json", {**asdict(config), "world_size": world, "device_used": str(device),
                                             "parameters": count_parameters(model)})
 
     from tqdm import tqdm
@@ -246,25 +287,33 @@ def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
                desc=f"train {config.stage}")
     metrics: dict[str, float] = {}
     model.train()
+    batches = runs.batch_stream(sampler, config.batch, start, config.steps, rank, config.workers, device)
     for step in range(start, config.steps):
         t0 = time.perf_counter()
-        batch = sampler.batch(config.batch, step, rank)
+        batch = next(batches)
         if config.stage == "inverse":
-            loss, terms, _ = inverse_losses(net, batch, prior, weights, config.mvs_stencil)
+            loss, terms, _ = inverse_losses(fwd, batch, prior, weights, config.mvs_stencil)
         else:
             with torch.no_grad():
-                dec = decompose_and_solve(teacher, batch.image, batch.sky, prior)
-            pred = net(dec["normals"], dec["lighting"])
+                dec = decompose_and_solve(teacher_fwd, batch.image, batch.sky, prior)
+            pred = fwd(dec["normals"], dec["lighting"])
             fg = dec["foreground"]
             loss = ((pred - dec["shadow"]) ** 2 * fg).sum() / fg.sum().clamp_min(1.0)
             terms = {"shadow_mse": float(loss.detach())}
         opt.zero_grad(set_to_none=True)
-        loss.backward()
-        gnorm = torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-        opt.step()
+        if scaler is None:
+            loss.backward()
+            gnorm = torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+            opt.step()
+        else:  # fp16: scaled backward, the clip on the true gradients, a step skipped on overflow
+            scaler.scale(loss).backward()
+            scaler.unscale_(opt)
+            gnorm = torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+            scaler.step(opt)
+            scaler.update()
         seconds += time.perf_counter() - t0
         done = step + 1
-        terms = _mean_terms({**terms, "total": float(loss.detach())}, world)
+        terms = _mean_terms({**terms, "total": float(loss.detach())}, world, device)
         bar.update(1)
         bar.set_postfix(loss=f"{terms['total']:.4g}")
         if done % config.log_every == 0 or done == config.steps:
@@ -272,21 +321,24 @@ def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
         if done % config.ckpt_every == 0 or done == config.steps:
             if rank == 0:
                 ckpt.save_checkpoint(run, done, model, opt, {"config": asdict(config), "train_seconds": seconds,
-                                                             "world_size": world})
+                                                             "world_size": world, "device_used": str(device)},
+                                     scalers=scalers, device=device)
             _barrier()
         if done % config.val_every == 0 or done == config.steps:
-            if rank == 0:
-                metrics = validate(model if config.stage == "inverse" else teacher, prior, config,
-                                   shadow_net=model if config.stage == "shadow" else None,
+            if rank == 0:  # on the CPU, in fp32: the same held-out figures whatever trained the weights
+                metrics = validate(_cpu_copy(model) if config.stage == "inverse" else _cpu_copy(teacher), prior,
+                                   config, shadow_net=_cpu_copy(model) if config.stage == "shadow" else None,
                                    panel=run / "panels" / f"step_{done:07d}.png")
                 logs.write("val.csv", done, metrics)
                 model.train()
             _barrier()
+    batches.close()  # a DataLoader's workers stop here, not at garbage collection
     bar.close()
     logs.close()
     sync = _rank_divergence(model, world)
     if rank == 0:
         io.write_json(run / "summary.json", {"step": config.steps, "train_seconds": seconds, "world_size": world,
+                                             "device_used": str(device), "precision": config.precision,
                                              "parameters": count_parameters(model), "val": metrics,
                                              "rank_param_max_diff": sync})
     return {"step": config.steps, "train_seconds": seconds, "val": metrics}

@@ -17,7 +17,10 @@ Like :mod:`learned.train` the loop is
   command continues bit-identically after a kill;
 * **logged**: ``train.csv``, ``val.csv`` (relighting of held-out scenes against path
   tracing, :mod:`learned.relight_eval`: l1 / SSIM / PSNR / CIEDE2000 of the renderer and
-  of the Lambertian SH baselines), TensorBoard in ``RUN/tb``, PNG panels, a progress bar.
+  of the Lambertian SH baselines), TensorBoard in ``RUN/tb``, PNG panels, a progress bar;
+* **on any device and precision** as :mod:`learned.train` (``device``, ``precision``: the
+  networks under autocast, fp16 with one loss scaler per optimizer; ``workers``); validation
+  runs on CPU copies of the networks.
 
 ``physrelight train export-renderer --run RUN`` writes the generator alone as
 ``learned/weights/renderer.safetensors`` (kind ``renderer``).
@@ -25,6 +28,7 @@ Like :mod:`learned.train` the loop is
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import time
@@ -50,6 +54,7 @@ from .objectives import decompose_and_solve
 from .relight_eval import evaluate_relight, load_case, relight_cases
 from .relighter import Relighter
 from .renderer_objectives import RendererWeights, discriminator_loss, renderer_losses
+from . import runs
 from .runs import RunConfig, RunLogs, display
 
 __all__ = ["DecompositionCache", "RendererConfig", "export_renderer", "train_renderer"]
@@ -88,11 +93,15 @@ class RendererConfig(RunConfig):
     threads: int = 1
     weights: dict[str, float] = field(default_factory=lambda: RendererWeights().as_dict())
     progress: bool = True
+    device: str = "auto"  # auto | cpu | cuda | mps (learned.runs.resolve_device)
+    precision: str = "fp32"  # fp32 | bf16 | fp16 (learned.runs.autocast)
+    workers: int = 0  # DataLoader processes making the batches (0: in this process)
 
     def __post_init__(self) -> None:
         self.check_common(("width", "depth", "d_width", "res", "batch", "steps", "cross_scale", "val_every",
                            "val_images", "ckpt_every", "log_every", "threads"), ("lr", "lr_d"),
                           RendererWeights().as_dict())
+        self.check_compute_fields()
         if self.base not in BASES:
             raise ValueError(f"base must be one of {BASES}, got {self.base!r}")
         if isinstance(self.phase1_steps, bool) or not isinstance(self.phase1_steps, int) or self.phase1_steps < 0:
@@ -142,56 +151,70 @@ def build_models(config: RendererConfig) -> nn.ModuleDict:
                           "d": MultiscaleDiscriminator(3, config.d_width, layers=3, scales=2)})
 
 
+def _on(net: nn.Module, device: torch.device) -> nn.Module:
+    """``net`` on ``device``: itself on the CPU, else a moved copy (the CPU original stays for validation)."""
+    return net if device.type == "cpu" else copy.deepcopy(net).to(device)
+
+
 def train_renderer(config: RendererConfig) -> dict[str, Any]:
-    """Run (or resume) a renderer training run; return the last validation metrics and timings."""
+    """Run (or resume) a renderer training run; return the last validation metrics and timings.
+
+    An unavailable device or precision is a ``ValueError`` before anything is written."""
     torch.set_num_threads(config.threads)
+    device = runs.resolve_device(config.device)
+    runs.check_compute(device, config.precision)
     run = Path(config.out)
     (run / "panels").mkdir(parents=True, exist_ok=True)
     prior = load_prior(config.prior)
     inverse = _frozen(load_inverse(config.inverse or WEIGHTS_DIR / "inverse.safetensors"))
     shadow_net = _frozen(load_shadow(config.shadow or WEIGHTS_DIR / "shadow.safetensors"))
+    inverse_dev, shadow_dev = _on(inverse, device), _on(shadow_net, device)
+    inverse_fwd = runs.autocast(inverse_dev, device, config.precision)
+    shadow_fwd = runs.autocast(shadow_dev, device, config.precision)
     sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed)
-    cache = DecompositionCache(inverse, shadow_net, prior,
-                               Relighter(inverse, shadow_net, prior, config.res) if config.base == "quotient" else None)
+    cache = DecompositionCache(inverse_fwd, shadow_fwd, prior,
+                               Relighter(inverse_dev, shadow_dev, prior, config.res) if config.base == "quotient"
+                               else None)
     weights = RendererWeights(**config.weights)
 
-    models = build_models(config)
+    models = build_models(config).to(device)  # initialised on the CPU from the seed, then moved
     g, d = models["g"], models["d"]
+    g_fwd, d_fwd = runs.autocast(g, device, config.precision), runs.autocast(d, device, config.precision)
     opts = {"g": torch.optim.Adam(g.parameters(), lr=config.lr, betas=(0.5, 0.999)),
             "d": torch.optim.Adam(d.parameters(), lr=config.lr_d, betas=(0.5, 0.999))}
+    scalers = ({k: runs.grad_scaler(device, config.precision) for k in opts} if config.precision == "fp16"
+               else None)
 
-    start, seconds = ckpt.resume(run, models, opts, config)
+    start, seconds = ckpt.resume(run, models, opts, config, scalers=scalers, map_location=device)
     if start >= config.steps:
         print(f"{run}: already at step {start} >= {config.steps}")
         return {"step": start, "train_seconds": seconds}
 
     logs = RunLogs(run, start, True)
     if start == 0:
-        io.write_json(run / "config.json", {**asdict(config), "parameters_g": count_parameters(g),
-                                            "parameters_d": count_parameters(d)})
+        io.write_json(run / "config.json", {**asdict(config), "device_used": str(device),
+                                            "parameters_g": count_parameters(g), "parameters_d": count_parameters(d)})
     from tqdm import tqdm
 
     bar = tqdm(total=config.steps, initial=start, disable=not config.progress, dynamic_ncols=True,
                desc="train renderer")
     val: dict[str, float] = {}
     models.train()
+    batches = runs.batch_stream(sampler, config.batch, start, config.steps, 0, config.workers, device)
     for step in range(start, config.steps):
         t0 = time.perf_counter()
         phase = 1 if step < config.phase1_steps else 2
-        batch = sampler.batch(config.batch, step)
+        batch = next(batches)
         dec = cache.get(batch)
-        loss, terms, outputs = renderer_losses(g, d if phase == 2 else None, inverse, shadow_net, prior, batch, dec,
-                                               weights, phase, config.cross_scale, config.cross_match_scale)
+        loss, terms, outputs = renderer_losses(g_fwd, d_fwd if phase == 2 else None, inverse_fwd, shadow_fwd, prior,
+                                               batch, dec, weights, phase, config.cross_scale, config.cross_match_scale)
         opts["g"].zero_grad(set_to_none=True)
-        loss.backward()
-        gnorm = torch.nn.utils.clip_grad_norm_(g.parameters(), 1.0)
-        opts["g"].step()
+        gnorm = _backward_step(loss, g, opts["g"], scalers["g"] if scalers else None)
         extra = {}
         if phase == 2:
             opts["d"].zero_grad(set_to_none=True)  # drop what the generator's loss left on D
-            d_loss = discriminator_loss(d, batch, outputs)
-            d_loss.backward()
-            opts["d"].step()
+            d_loss = discriminator_loss(d_fwd, batch, outputs)
+            _backward_step(d_loss, None, opts["d"], scalers["d"] if scalers else None)
             extra["d_loss"] = float(d_loss.detach())
         seconds += time.perf_counter() - t0
         done = step + 1
@@ -202,16 +225,40 @@ def train_renderer(config: RendererConfig) -> dict[str, Any]:
                                            "total": float(loss.detach()), "d_loss": extra.get("d_loss", math.nan),
                                            "phase": float(phase), "grad_norm": float(gnorm), "seconds": seconds})
         if done % config.ckpt_every == 0 or done == config.steps:
-            ckpt.save_checkpoint(run, done, models, opts, {"config": asdict(config), "train_seconds": seconds})
+            ckpt.save_checkpoint(run, done, models, opts, {"config": asdict(config), "train_seconds": seconds,
+                                                           "device_used": str(device)},
+                                 scalers=scalers, device=device)
         if done % config.val_every == 0 or done == config.steps:
-            val = validate(g, inverse, shadow_net, prior, config, panel=run / "panels" / f"step_{done:07d}.png")
+            g_cpu = g if device.type == "cpu" else copy.deepcopy(g).cpu()  # validation runs on the CPU
+            val = validate(g_cpu, inverse, shadow_net, prior, config, panel=run / "panels" / f"step_{done:07d}.png")
             logs.write("val.csv", done, val)
             models.train()
+    batches.close()
     bar.close()
     logs.close()
     io.write_json(run / "summary.json", {"step": config.steps, "train_seconds": seconds,
                                          "parameters_g": count_parameters(g), "val": val})
     return {"step": config.steps, "train_seconds": seconds, "val": val}
+
+
+def _backward_step(loss: torch.Tensor, clipped: nn.Module | None, opt: torch.optim.Optimizer,
+                   scaler: "torch.amp.GradScaler | None") -> torch.Tensor | None:
+    """Backward and one optimizer step, the gradients of ``clipped`` (if given) clipped to norm 1; with an
+    fp16 ``scaler``, scaled and unscaled around the clip, the step skipped on overflow. Returns the norm."""
+    gnorm = None
+    if scaler is None:
+        loss.backward()
+        if clipped is not None:
+            gnorm = torch.nn.utils.clip_grad_norm_(clipped.parameters(), 1.0)
+        opt.step()
+        return gnorm
+    scaler.scale(loss).backward()
+    if clipped is not None:
+        scaler.unscale_(opt)
+        gnorm = torch.nn.utils.clip_grad_norm_(clipped.parameters(), 1.0)
+    scaler.step(opt)
+    scaler.update()
+    return gnorm
 
 
 def validate(renderer: NeuralRenderer, inverse: nn.Module, shadow_net: nn.Module, prior: LightingPrior, config: RendererConfig,
