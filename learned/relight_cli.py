@@ -223,7 +223,7 @@ def _relight(args: argparse.Namespace) -> int:
         if args.method is not None and not (args.method.startswith("quotient") or args.method == "proposed"):
             raise ValueError("--source-env/--source-sh need --method proposed or a quotient method")
     if args.method is None:
-        from .relighter import DEFAULT_METHOD
+        from .relight_options import DEFAULT_METHOD
 
         args.method = DEFAULT_METHOD
     exposure = parse_exposure(args.exposure)
@@ -247,12 +247,11 @@ def _relight(args: argparse.Namespace) -> int:
         source = _target(args.source_env, args.source_sh, None, what="source")
     fov = args.fov if args.fov is not None else photo.fov_deg if photo.fov_deg is not None else None
 
-    from .relighter import DEFAULT_FOV_DEG, DENOISE, Relighter
+    from .relight_options import DEFAULT_FOV_DEG, DENOISE, RelightOptions
+    from .relighter import Relighter
 
-    relighter = Relighter.load(args.weights)
-    relighter.sky_grow = args.sky_grow
-    if args.denoise:
-        relighter.denoise = DENOISE
+    relighter = Relighter.load(args.weights, options=RelightOptions(sky_grow=args.sky_grow,
+                                                                     denoise=DENOISE if args.denoise else None))
     common = dict(sky_mask=mask, method=args.method, sky=args.sky or "clear", new_sky=not args.keep_sky,
                   seed=args.seed, sky_source=args.sky_source, exposure=exposure,
                   fov_deg=fov if fov is not None else DEFAULT_FOV_DEG, pitch_deg=args.pitch, source=source,
@@ -301,8 +300,9 @@ def _exposure(text: str) -> str | float:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``relight``."""
     from physrelight.cli_common import number_in, positive_int, positive_number
+    from physrelight.target_lighting import SKY_TYPES
 
-    from .relighter import RELIGHT_METHODS, SKY_SOURCES, SKY_TYPES
+    from .relight_options import RELIGHT_METHODS, SKY_SOURCES
     from .sky_segmentation import GROW_REACH
 
     p = sub.add_parser("relight", help="relight one outdoor photo to a new lighting (shipped weights)",
