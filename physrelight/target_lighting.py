@@ -222,8 +222,7 @@ def rotate_azimuth(target: Any, degrees: float) -> Any:
     ``degrees`` about +Y (the SH rotation is exact; env maps are projected first): a sun direction ``(3,)`` or
     SH ``(9, 3)`` comes back."""
     target = read_target(target)
-    a = math.radians(float(degrees))
-    R = np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0], [-math.sin(a), 0.0, math.cos(a)]])
+    R = rotations.about_y(float(degrees))  # the same turn as turned_camera's, from one formula
     t = np.asarray(target, dtype=np.float64) if not isinstance(target, torch.Tensor) else target.double().numpy()
     if t.shape == (3,):
         return R @ t
