@@ -137,7 +137,7 @@ def test_04_layers_point_down(lower: str, upper: str) -> None:
 # relighter (which imports them).
 CORE_HOMES = {
     "physrelight.image_input": ("as_batch", "as_image", "as_radiance", "give_back", "as_mask", "as_rotation"),
-    "physrelight.target_lighting": ("sun_sky_map", "sun_lighting", "envmap_sun", "sky_map_kind", "sun_rgb",
+    "physrelight.target_lighting": ("sun_sky_map", "sun_lighting", "sky_map_kind", "sun_rgb",
                                     "clear_sky_sun", "overcast_level", "rotate_azimuth", "turned_camera",
                                     "target_lighting", "target_sun", "camera_target", "as_lighting_batch",
                                     "read_target"),
