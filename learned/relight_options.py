@@ -98,7 +98,8 @@ class RelightOptions:
             return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
         if self.lighting_estimator not in LIGHTING_ESTIMATORS:
-            raise ValueError(f"lighting_estimator must be one of {LIGHTING_ESTIMATORS}, got {self.lighting_estimator!r}")
+            raise ValueError(f"lighting_estimator must be one of {LIGHTING_ESTIMATORS}, "
+                             f"got {self.lighting_estimator!r}")
         if not isinstance(self.source_config, SourceLightingConfig):
             raise ValueError(f"source_config must be a SourceLightingConfig, got {type(self.source_config).__name__}")
         if not number(self.ratio_radius) or self.ratio_radius < 0 or int(self.ratio_radius) != self.ratio_radius:

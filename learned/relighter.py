@@ -2,10 +2,11 @@
 renderer on the quotient image, the new sky.
 
 ``Relighter.load()`` reads the weights shipped in ``learned/weights`` (safetensors, no network access needed);
-its tuning is one frozen :class:`learned.relight_options.RelightOptions` given at construction. ``decompose(image)`` gives albedo, normals
-(camera frame), shadow and the solved, prior-projected SH lighting (camera frame); ``relight(image, target)``,
-``relight_sequence`` and ``relight_layers`` relight a photo of any size, one step under three wrappers
-(:class:`learned.relight_options.RelightRequest` names their keyword arguments once).
+its tuning is one frozen :class:`learned.relight_options.RelightOptions` given at construction.
+``decompose(image)`` gives albedo, normals (camera frame), shadow and the solved, prior-projected SH lighting
+(camera frame); ``relight(image, target)``, ``relight_sequence`` and ``relight_layers`` relight a photo of any
+size, one step under three wrappers (:class:`learned.relight_options.RelightRequest` names their keyword arguments
+once).
 
 What is not learned lives in the core: the photo at the door (:mod:`physrelight.image_input`), the target
 lighting and its sun (:mod:`physrelight.target_lighting`), the target's sky through the camera
@@ -322,7 +323,8 @@ class Relighter:
         shape at the given source level.
 
         ``decomposition["lighting"] / scale`` is the estimate in the given source's units (``scale`` from
-        :func:`physrelight.exposure.exposure_scale`, ``(B, 1, 1)``); the implied albedo is ``lum(image) / lum(shading(n; that))``
+        :func:`physrelight.exposure.exposure_scale`, ``(B, 1, 1)``); the implied albedo is
+        ``lum(image) / lum(shading(n; that))``
         (:func:`learned.source_lighting.grey_world_level`). Above 1, the photo is brighter than a middle-grey
         scene under that lighting would be: more light falls on the visible surfaces than the estimated shape
         puts there. ``image (B, 3, H, W)`` linear, ``sky (B, 1, H, W)`` bool.
@@ -353,8 +355,8 @@ class Relighter:
         The image is resized so its short side is ``working_res`` (None: the networks' ``res``;
         :func:`physrelight.full_resolution.working_resolution`), relit there, and brought back by ratio transfer
         (:func:`physrelight.full_resolution.transfer_to_full_resolution`), so detail finer than the working
-        resolution survives. With :attr:`RelightOptions.denoise` set (off by default, study 37) the foreground is relit from the photo smoothed by
-        :func:`physrelight.denoise.denoise`; sky pixels stay the photo's own.
+        resolution survives. With :attr:`RelightOptions.denoise` set (off by default, study 37) the foreground is
+        relit from the photo smoothed by :func:`physrelight.denoise.denoise`; sky pixels stay the photo's own.
 
         Args:
             image: ``(B, 3, H, W)`` linear; sky ``(B, 1, H, W)`` bool; target, source_lighting,
@@ -421,8 +423,9 @@ class Relighter:
         """
         req = RelightRequest(world_to_camera, sky_mask, **request)
         lin, kind, gain = as_radiance(image) if radiance else (*as_image(image), 1.0)
-        frames = [self._relight_tensors(lin[b: b + 1], target, req if lin.shape[0] == 1 else dataclasses.replace(
-                      req, sky_mask=None if sky_mask is None else as_mask(sky_mask, lin)[b: b + 1]), layers=False)["relit"]
+        reqs = [req if lin.shape[0] == 1 else dataclasses.replace(
+            req, sky_mask=None if sky_mask is None else as_mask(sky_mask, lin)[b: b + 1]) for b in range(lin.shape[0])]
+        frames = [self._relight_tensors(lin[b: b + 1], target, reqs[b], layers=False)["relit"]
                   for b in range(lin.shape[0])]
         return give_back(torch.cat(frames) / gain if req.linear else torch.cat(frames), kind)
 
@@ -444,7 +447,8 @@ class Relighter:
         reuse: dict[str, Any] = {}
         azimuths = np.asarray(azimuths_deg, dtype=np.float64).ravel()
         frames = (self._relight_tensors(lin, target, dataclasses.replace(req, azimuth_deg=float(a)), layers=False,
-                                        reuse=reuse)["relit"] for a in tqdm(azimuths, desc="relight", disable=not progress))
+                                        reuse=reuse)["relit"]
+                  for a in tqdm(azimuths, desc="relight", disable=not progress))
         return [give_back(f / gain if req.linear else f, kind) for f in frames]
 
     def relight_layers(self, image: Any, target: Any, world_to_camera: Any = None, sky_mask: Any = None,
