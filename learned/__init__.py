@@ -3,8 +3,8 @@ lighting solved and projected onto an outdoor subspace, ShadowNet; trained self-
 
 ``from learned import Relighter``: ``Relighter.load()`` uses the weights shipped in
 ``learned/weights``. Modules, photo to relit photo: ``data``, ``networks``, ``lighting`` (the
-prior), ``objectives``, ``neural_renderer``, ``sky_segmentation``, ``sky_gan``, ``relighter``,
-``relight_cli``; training: ``runs`` (what the loops share), ``train``, ``train_renderer``,
+prior), ``objectives``, ``neural_renderer``, ``sky_segmentation``, ``sky_gan``, ``relight_options``,
+``relighter``, ``relight_cli``; training: ``runs`` (what the loops share), ``train``, ``train_renderer``,
 ``train_sky``, ``checkpoint``, ``evaluate``, ``relight_eval``, ``cli`` (docs/learned.md).
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["Relighter"]
+__all__ = ["RelightOptions", "Relighter"]
 
 
 def __getattr__(name: str) -> Any:
@@ -21,4 +21,8 @@ def __getattr__(name: str) -> Any:
         from .relighter import Relighter
 
         return Relighter
+    if name == "RelightOptions":
+        from .relight_options import RelightOptions
+
+        return RelightOptions
     raise AttributeError(f"module 'learned' has no attribute {name!r}")

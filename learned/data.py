@@ -42,6 +42,7 @@ import torch
 import torch.nn.functional as F
 
 from physrelight import camera, colour
+from physrelight.full_resolution import resize_short_side  # the core's: the relighter's working size uses it too
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import PhotoParams, make_photo, sample_photo_params
 
@@ -100,19 +101,6 @@ class Batch:
         """Rows reordered so row i holds the other photo of row i's pair (``[b; a]``)."""
         n = self.pairs
         return torch.cat([x[n:], x[:n]], 0)
-
-
-def resize_short_side(x: torch.Tensor, res: int) -> torch.Tensor:
-    """Resize ``x (B, C, H, W)`` so its short side is ``res``, aspect ratio kept (long side
-    rounded): area averaging when shrinking, bilinear when enlarging; ``x`` itself if the size holds."""
-    h, w = x.shape[-2:]
-    k = res / min(h, w)
-    size = (max(1, round(h * k)), max(1, round(w * k)))
-    if size == (h, w):
-        return x
-    if k < 1:
-        return F.interpolate(x, size=size, mode="area")
-    return F.interpolate(x, size=size, mode="bilinear", align_corners=False)
 
 
 def resize_view(image: torch.Tensor, depth: torch.Tensor, sky: torch.Tensor, K: torch.Tensor,

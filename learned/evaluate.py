@@ -42,7 +42,7 @@ Metrics, each next to a trivial baseline:
 
 * **level error** (``level_err_stops``): every metric above is blind to the one scale that albedo
   and lighting share, but a relit photo is not: the relighter brings the target lighting into the
-  decomposition's units by its DC level (:func:`learned.relighter.match_exposure`), so the relit
+  decomposition's units by its DC level (:func:`physrelight.exposure.match_exposure`), so the relit
   photo's brightness follows the level of albedo x lighting, ``mean_fg lum(albedo) * lum(DC of L)``,
   against the truth's in photo units. Per photo ``|log2(level / level_gt)|`` in stops, clipped at 10
   (:func:`level_log2_ratio`; ``level_log2_ratio`` is its signed mean: + = too bright). Invariant to
@@ -149,7 +149,7 @@ def level_log2_ratio(albedo: torch.Tensor, lighting: torch.Tensor, true_albedo: 
 
     The level is ``mean over mask of lum(albedo) * lum(DC of lighting)``: the one scale that a
     photo leaves free between albedo and lighting cancels in it, so it measures the product that
-    a relight by DC level (:func:`learned.relighter.match_exposure`) carries into its output.
+    a relight by DC level (:func:`physrelight.exposure.match_exposure`) carries into its output.
 
     Args:
         albedo, true_albedo: ``(3, H, W)``.
@@ -162,7 +162,7 @@ def level_log2_ratio(albedo: torch.Tensor, lighting: torch.Tensor, true_albedo: 
     Raises:
         ValueError: an empty mask, or a true level that is not positive.
     """
-    from .relighter import dc_luminance  # the DC level the relighter matches by
+    from physrelight.exposure import dc_luminance  # the DC level the relighter matches by
 
     if not bool(mask.any()):
         raise ValueError("level_log2_ratio: empty mask")

@@ -260,7 +260,7 @@ def _relight(args: argparse.Namespace) -> int:
         if args.method is not None and not (args.method.startswith("quotient") or args.method == "proposed"):
             raise ValueError("--source-env/--source-sh need --method proposed or a quotient method")
     if args.method is None:
-        from .relighter import DEFAULT_METHOD
+        from .relight_options import DEFAULT_METHOD
 
         args.method = DEFAULT_METHOD
     exposure = parse_exposure(args.exposure)
@@ -294,12 +294,12 @@ def _relight(args: argparse.Namespace) -> int:
         source = _target(args.source_env, args.source_sh, None, what="source")
     fov = args.fov if args.fov is not None else photo.fov_deg if photo.fov_deg is not None else None
 
-    from .relighter import DEFAULT_FOV_DEG, DENOISE, Relighter
+    from .relight_options import DEFAULT_FOV_DEG, DENOISE, RelightOptions
+    from .relighter import Relighter
 
-    relighter = Relighter.load(args.weights)
-    relighter.sky_grow = args.sky_grow
+    relighter = Relighter.load(args.weights, options=RelightOptions(sky_grow=args.sky_grow,
+                                                                     denoise=DENOISE if args.denoise else None))
     if args.denoise:
-        relighter.denoise = DENOISE
         note = _denoise_note(image)
         if note is not None:
             print(f"physrelight: note: {note}", file=sys.stderr)
@@ -354,8 +354,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``relight``."""
     from physrelight.cli_common import finite_number, number_in, positive_int, positive_number
     from physrelight.sky_mask import GROW_REACH
+    from physrelight.target_lighting import SKY_TYPES
 
-    from .relighter import RELIGHT_METHODS, SKY_SOURCES, SKY_TYPES
+    from .relight_options import RELIGHT_METHODS, SKY_SOURCES
 
     p = sub.add_parser("relight", help="relight one outdoor photo to a new lighting (shipped weights)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

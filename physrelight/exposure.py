@@ -30,7 +30,8 @@ import torch
 from physrelight import colour
 from physrelight.stats import quantile
 
-__all__ = ["DARK_KEY", "MIDDLE_GREY", "MODES", "exposure_gain", "log_average", "parse_exposure"]
+__all__ = ["DARK_KEY", "MIDDLE_GREY", "MODES", "dc_luminance", "exposure_gain", "exposure_scale", "log_average",
+           "match_exposure", "parse_exposure"]
 
 MIDDLE_GREY = 0.18
 DARK_KEY = 0.045
@@ -101,3 +102,39 @@ def exposure_gain(mode: str | float, relit: torch.Tensor, source: torch.Tensor,
             if bool(highlights[b].any()):
                 gain[b] = torch.minimum(gain[b], 1.0 / quantile(y[b][highlights[b]].float(), 0.99).clamp_min(1e-12))
     return gain.clamp(2.0**-16, 2.0**16)
+
+
+def dc_luminance(lighting: torch.Tensor) -> torch.Tensor:
+    """``(B, 9, 3)`` radiance SH -> ``(B,)`` luminance of the DC term (the lighting's overall level)."""
+    lum = torch.tensor(colour.LUMINANCE, dtype=lighting.dtype)
+    return (lighting[:, 0] * lum).sum(-1)
+
+
+def exposure_scale(target: torch.Tensor, estimated_source: torch.Tensor, given_source: torch.Tensor | None = None,
+                   fallback: torch.Tensor | None = None) -> torch.Tensor:
+    """``(B,)`` the factor that brings ``target (B, 9, 3)`` into a decomposition's units.
+
+    The decomposition's albedo and lighting share an unknown scale. With ``given_source``
+    ``(B, 9, 3)`` (the source lighting in the target's units) it is
+    ``lum(DC estimated) / lum(DC given)``; without it, ``lum(DC estimated) / lum(DC target)``,
+    so the scaled target's DC luminance equals the estimated source lighting's (the photo keeps
+    its exposure). Where the estimate has no positive level (below 1e-6 of ``fallback``'s, e.g. a
+    photo without usable foreground), ``fallback`` ``(1 or B, 9, 3)`` (the prior's mean) stands in.
+
+    Raises:
+        ValueError: the target (or the given source) has no positive DC luminance.
+    """
+    ref = dc_luminance(given_source.to(target.dtype) if given_source is not None else target)
+    if bool((ref <= 0).any()) or bool((dc_luminance(target) <= 0).any()):
+        raise ValueError("target (or source) lighting has no positive DC luminance (a dark or invalid lighting)")
+    est = dc_luminance(estimated_source.to(target.dtype))
+    if fallback is not None:
+        fb = dc_luminance(fallback.to(target.dtype)).expand_as(est)
+        est = torch.where(est > 1e-6 * fb, est, fb)
+    return est.clamp_min(0) / ref
+
+
+def match_exposure(target: torch.Tensor, estimated_source: torch.Tensor, given_source: torch.Tensor | None = None,
+                   fallback: torch.Tensor | None = None) -> torch.Tensor:
+    """``target (B, 9, 3)`` times :func:`exposure_scale`: the target in a decomposition's units."""
+    return target * exposure_scale(target, estimated_source, given_source, fallback)[:, None, None]

@@ -48,7 +48,7 @@ __all__ = ["ANGSTROM_ALPHA", "ANGSTROM_BETA", "CLEAR_HORIZON", "CLEAR_ZENITH", "
 CLEAR_ZENITH = (0.30, 0.50, 1.0)
 CLEAR_HORIZON = (0.80, 0.88, 1.0)
 GLOW_EXPONENT = 32
-"""The glow of the clear sky of a sun target (``learned.relighter.sun_sky_map``): the aureole."""
+"""The glow of the clear sky of a sun target (``physrelight.target_lighting.sun_sky_map``): the aureole."""
 FIT_GLOW_EXPONENT = 2.0
 """The glow's exponent in :func:`fit_sky`: the widest of 32, 16, 8, 4, 2 scored best on the training
 panoramas' crops (study 31, round 2; the differences were within 0.2 dB)."""

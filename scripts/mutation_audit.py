@@ -34,6 +34,8 @@ T_PINS = "tests/learned/test_relight_pins.py"
 T_REAL = "tests/learned/test_relight_real.py"
 T_CLI = "tests/learned/test_relight_cli.py"
 T_MASK = "tests/physrelight/test_sky_mask.py"
+T_ENV = "tests/physrelight/test_envmap.py"
+T_VIEW = "tests/physrelight/test_sky_view.py"
 PINS_STORED = f"{T_PINS}::test_10_the_shipped_pipeline_reproduces_its_stored_output_on_a_fixed_photo"
 
 
@@ -56,19 +58,22 @@ MUTATIONS: tuple[Mutation, ...] = (
              "if cfg.robust and it > 0 and not sky_only:", "if cfg.robust and it > 1 and not sky_only:",
              (f"{T_SRC}::test_12_one_reweighting_already_pulls_the_solve_towards_the_truth",)),
     Mutation("3 relighter: auto exposure without the sky-clipping guard", "learned/relighter.py",
-             "exposure_gain(exposure, relit, lin, ~sky, highlights=sky)", "exposure_gain(exposure, relit, lin, ~sky)",
+             "exposure_gain(req.exposure, relit, lin, ~sky, highlights=sky)", "exposure_gain(req.exposure, relit, lin, ~sky)",
              (f"{T_PINS}::test_11_auto_exposure_meters_the_source_photo_and_spares_the_sky", PINS_STORED)),
     Mutation("4 relighter: auto exposure metered on the relit image", "learned/relighter.py",
-             "exposure_gain(exposure, relit, lin, ~sky, highlights=sky)",
-             "exposure_gain(exposure, relit, relit, ~sky, highlights=sky)",
+             "exposure_gain(req.exposure, relit, lin, ~sky, highlights=sky)",
+             "exposure_gain(req.exposure, relit, relit, ~sky, highlights=sky)",
              (f"{T_PINS}::test_11_auto_exposure_meters_the_source_photo_and_spares_the_sky", PINS_STORED)),
-    Mutation("5 relighter: the sun disc's colour in BGR order", "learned/relighter.py",
-             "torch.from_numpy(_sun_rgb(d))).to(out.dtype)",
-             "torch.from_numpy(_sun_rgb(d)[::-1].copy())).to(out.dtype)",
-             (f"{T_REAL}::test_02c_a_low_suns_disc_is_red_as_its_light",)),
-    Mutation("6 relighter: envmap_sun's share of peak doubled", "learned/relighter.py",
-             "SUN_SHARE_OF_PEAK = 0.25", "SUN_SHARE_OF_PEAK = 0.5",
-             (f"{T_REAL}::test_12b_an_env_maps_sun_is_its_texels_over_a_quarter_of_the_peak",)),
+    Mutation("5 sky view: the sun disc's colour in BGR order", "physrelight/sky_view.py",
+             "torch.from_numpy(sun_rgb(d))).to(out.dtype)",
+             "torch.from_numpy(sun_rgb(d)[::-1].copy())).to(out.dtype)",
+             (f"{T_VIEW}::test_02_a_low_suns_disc_is_red_as_its_light",)),
+    Mutation("6 envmap: split_sun's contrast to the ring doubled (was envmap_sun's share of peak)", "physrelight/envmap.py",
+             "contrast: float = 4.0) -> SunSky:", "contrast: float = 8.0) -> SunSky:",
+             (f"{T_ENV}::test_18_an_env_maps_sun_is_its_texels_over_four_times_the_ring_within_three_degrees",)),
+    Mutation("6b envmap: split_sun's least energy share doubled", "physrelight/envmap.py",
+             "min_fraction: float = 0.01,", "min_fraction: float = 0.02,",
+             (f"{T_ENV}::test_18_an_env_maps_sun_is_its_texels_over_four_times_the_ring_within_three_degrees",)),
     Mutation("7 relighter: paint_sky ignores its seed", "learned/relighter.py",
              'working["target"], seed=seed)', 'working["target"], seed=0)',
              (f"{T_REAL}::test_10c_skygans_sky_is_the_seeds",)),

@@ -3,7 +3,7 @@
     .venv/bin/python scripts/readme_sh_sky.py [--out docs/images/rocket_sh_sky.png]
 
 Rows: the SH of the shipped city and forest HDRIs (``sh.project_envmap(envmap.read(...), order=2)``).
-Columns: SkyGAN's own sky (``Relighter.sky_smooth = 0``, the default before study 31) | the default
+Columns: SkyGAN's own sky (``RelightOptions(sky_smooth=0)``, the default before study 31) | the default
 (SkyGAN blurred within the mask, ``--sky-source gan``) | the sky model fitted to the SH
 (``--sky-source fit``). Everything else is the command line's defaults (``--method proposed --exposure
 auto``, field of view 60 degrees, pitch from the sky). No ground truth: for the eye.
@@ -40,9 +40,8 @@ def main() -> None:
         coeffs = np.asarray(sh.project_envmap(envmap.read(ROOT / "physrelight" / "data" / "hdri" / f"{name}.exr"), 2))
         row = []
         for smooth, source in ((0.0, "gan"), (None, "gan"), (None, "fit")):
-            r.sky_smooth = smooth
-            row.append(r.relight(photo, coeffs, method="proposed", exposure="auto", sky_source=source))
-        r.sky_smooth = None
+            row.append(r.with_options(sky_smooth=smooth).relight(photo, coeffs, method="proposed", exposure="auto",
+                                                                 sky_source=source))
         rows.append((f"{name} HDRI's SH", row))
     save_grid(rows, COLUMNS, args.out, started=t0)
 

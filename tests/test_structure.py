@@ -174,3 +174,38 @@ def test_06_one_gaussian_blur() -> None:
                                                       or "gaussian_kernel" in node.name):
                 found.setdefault(name, []).append(node.name)
     assert found == {"physrelight.filters": ["gaussian_kernel1d", "gaussian_blur"]}, found
+
+
+# What is not learned lives in the core (issue 41): each name in its core module, none of them defined again in the
+# relighter (which imports them).
+CORE_HOMES = {
+    "physrelight.image_input": ("as_batch", "as_image", "as_radiance", "give_back", "as_mask", "as_rotation"),
+    "physrelight.target_lighting": ("sun_sky_map", "sun_lighting", "sky_map_kind", "sun_rgb",
+                                    "clear_sky_sun", "overcast_level", "rotate_azimuth", "turned_camera",
+                                    "target_lighting", "target_sun", "camera_target", "as_lighting_batch",
+                                    "read_target"),
+    "physrelight.sky_view": ("target_sky", "fitted_sky", "rendered_sky"),
+    "physrelight.horizon": ("estimate_pitch", "pitch_from_verticals", "estimate_camera_pitch", "photo_camera"),
+    "physrelight.exposure": ("dc_luminance", "exposure_scale", "match_exposure", "exposure_gain"),
+    "physrelight.full_resolution": ("resize_short_side", "working_resolution", "transfer_to_full_resolution"),
+}
+
+
+def _defined(module: str) -> set[str]:
+    """The functions, classes and methods a module defines (at any depth), read with ``ast``."""
+    path, _ = _modules()[module]
+    return {n.name for n in ast.walk(ast.parse(path.read_text()))
+            if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))}
+
+
+def test_07_the_non_learned_steps_live_in_the_core_and_the_relighter_imports_them() -> None:
+    graph = import_graph()
+    relighter = _defined("learned.relighter")
+    for module, names in CORE_HOMES.items():
+        assert not {d for d in graph[module] if d.split(".")[0] in UPPER}, module
+        missing = set(names) - _defined(module)
+        assert not missing, f"{module} lacks {sorted(missing)}"
+        again = set(names) & relighter
+        assert not again, f"learned.relighter defines {sorted(again)} again (their home is {module})"
+    assert {"physrelight.target_lighting", "physrelight.sky_view", "physrelight.full_resolution"} <= graph[
+        "learned.relighter"]

@@ -13,7 +13,7 @@ target SH shading) and ``identity`` (the photo unchanged). A real photo that shi
 scikit-image (``rocket.jpg``) is relit too (no ground truth: for the eye).
 
 The panel shows each relit photo with the target's own sky painted in, as ``physrelight relight`` paints it
-(:func:`learned.relighter.target_sky`: the target's sky map seen through the scene's camera, in the photo's
+(:func:`physrelight.sky_view.target_sky`: the target's sky map seen through the scene's camera, in the photo's
 exposure), so the sky says which lighting the foreground was relit to, and beside each method its error
 against the path-traced target: ``|relit - target|`` luminance of the display values, one colour scale for
 every error map of the panel, with its colour bar. The scores (l1, PSNR, SSIM) are on the foreground only.
@@ -83,9 +83,9 @@ def with_target_sky(display: torch.Tensor, sky: np.ndarray, sky_map: np.ndarray,
                     world_to_camera: np.ndarray, gain: float) -> torch.Tensor:
     """``(1, 3, H, W)`` display values ``display`` with the target's sky on ``sky (H, W)`` bool: the lat-long
     ``sky_map (h, 2h, 3)`` (world frame, target radiance) seen through the camera (``K (3, 3)``,
-    ``world_to_camera (4, 4)``) by :func:`learned.relighter.target_sky`, as ``physrelight relight`` paints a
+    ``world_to_camera (4, 4)``) by :func:`physrelight.sky_view.target_sky`, as ``physrelight relight`` paints a
     target's sky, times the photo's exposure ``gain``, to display values."""
-    from learned.relighter import target_sky
+    from physrelight.sky_view import target_sky
 
     h, w = display.shape[-2:]
     if sky.shape != (h, w):

@@ -217,14 +217,16 @@ def test_08_exported_weights_load_offline_and_relight(tiny_dataset: Path, tiny_p
     env = np.ones((8, 16, 3), np.float32)
     relit_t = r.relight(torch.from_numpy(photo).permute(2, 0, 1), env, world_to_camera=np.eye(4))
     assert relit_t.shape == (3, 24, 32)
-    sun = r.target_lighting(np.array([0.0, 2.0, 0.0]))  # sun overhead, level camera
     from physrelight import sh
+    from physrelight.target_lighting import target_lighting
+
+    sun = target_lighting(np.array([0.0, 2.0, 0.0]))  # sun overhead, level camera
 
     e_up = sh.irradiance(sun.numpy(), np.array([[0.0, 1.0, 0.0]]))[0]
     # the order-2 sun at its own direction (1/4 + 1/2 + 5/16 = 1.0625 in every channel, the clamped
     # cosine's truncation) + the clear fill sky (Hosek-Wilkie's with the sun overhead: 0.21 of the sun's
     # irradiance in green, bluer than it is red; checked against Mitsuba in tests/synth/test_sunsky_table.py)
-    from learned.relighter import sun_sky_map
+    from physrelight.target_lighting import sun_sky_map
 
     sky_up = sh.irradiance(sh.project_envmap(sun_sky_map("clear", [0.0, 1.0, 0.0]), order=2),
                            np.array([[0.0, 1.0, 0.0]]))[0]

@@ -28,7 +28,7 @@ def photo(tmp_path_factory) -> Path:
 
 def test_01_sun_direction_and_azimuth_follow_the_documented_frame() -> None:
     from learned.relight_cli import sun_direction
-    from learned.relighter import rotate_azimuth, sun_lighting
+    from physrelight.target_lighting import rotate_azimuth, sun_lighting
 
     np.testing.assert_allclose(sun_direction(0, 0), [0, 0, -1], atol=1e-12)  # ahead of the camera
     np.testing.assert_allclose(sun_direction(0, 90), [1, 0, 0], atol=1e-12)  # to its right
@@ -130,13 +130,13 @@ def test_04_bad_input_is_one_line_and_non_zero(photo: Path, tmp_path: Path, caps
 
 
 def test_05_denoise_is_the_relighters_option(photo: Path, tmp_path: Path) -> None:
-    """``--denoise`` is ``Relighter.denoise = DENOISE`` (off by default, study 37). On the fixture photo its flat
+    """``--denoise`` is ``RelightOptions(denoise=DENOISE)`` (off by default, study 37). On the fixture photo its flat
     sky shows no noise, so the noise floor is 0 and the option changes nothing, however busy the foreground's
     per-pixel texture; on the same photo with sensor noise added, the command line's output equals the API's with
     the option on and differs from the default's."""
     from learned import Relighter
     from learned.relight_cli import sun_direction
-    from learned.relighter import DENOISE
+    from learned.relight_options import DENOISE, RelightOptions
 
     kw = dict(method="quotient", exposure="keep", new_sky=False, fov_deg=60.0)
     args = ["--sun", "20", "120", "--method", "quotient", "--exposure", "keep", "--keep-sky", "--fov", "60",
@@ -151,8 +151,7 @@ def test_05_denoise_is_the_relighters_option(photo: Path, tmp_path: Path) -> Non
     noisy = tmp_path / "noisy.png"
     io.write_png(noisy, np.clip(io.read_image(photo) + rng.normal(0.0, 0.03, (52, 76, 3)), 0.0, 1.0))
     on, off = run(noisy, "on.png", "--denoise"), run(noisy, "off.png")
-    r = Relighter.load()
-    r.denoise = DENOISE
+    r = Relighter.load(options=RelightOptions(denoise=DENOISE))
     want = r.relight((io.read_image(noisy) * 255).round().astype(np.uint8), sun_direction(20.0, 120.0), **kw)
     assert np.abs(on - want).max() <= 1.0 / 255 + 1e-6
     assert np.abs(off - on).mean() > 1e-3

@@ -29,6 +29,7 @@ import pytest
 import torch
 
 from physrelight import colour, envmap, io, sh
+from physrelight.target_lighting import target_lighting
 
 ROOT = Path(__file__).resolve().parents[2]
 FOREST = ROOT / "physrelight" / "data" / "hdri" / "forest.exr"
@@ -165,7 +166,7 @@ def _mean_diff(a: np.ndarray, b: np.ndarray) -> float:
 @pytest.mark.parametrize("kind", ["env", "sh", "sun"])
 def test_01_relight_with_an_azimuth_is_relight_of_the_target_turned_by_rotate_azimuth(relighter, photo, targets,
                                                                                      kind: str) -> None:
-    from learned.relighter import rotate_azimuth
+    from physrelight.target_lighting import rotate_azimuth
 
     # Compared on the foreground of a given sky mask: an env map carries its own sky, which its SH
     # projection (what rotate_azimuth returns for a map) does not.
@@ -220,18 +221,18 @@ def test_03_world_to_camera_rotates_the_target_into_the_camera_not_out_of_it(rel
     assert np.abs(R - R.T).max() > 0.5  # far from its inverse
     # The env map seen from the camera, rotated by hand: env_cam(w) = env(R^T w).
     by_hand = sh.project_envmap(envmap.rotate(env, R), order=2)
-    got = relighter.target_lighting(env, R).numpy()
+    got = target_lighting(env, R).numpy()
     scale = np.abs(by_hand).max()
     assert np.abs(got - by_hand).max() < 0.01 * scale  # bilinear resampling error only
-    assert np.abs(relighter.target_lighting(env, R.T).numpy() - by_hand).max() > 0.3 * scale
+    assert np.abs(target_lighting(env, R.T).numpy() - by_hand).max() > 0.3 * scale
     # A (4, 4) pose with a translation is its rotation block.
     pose = np.eye(4)
     pose[:3, :3], pose[:3, 3] = R, [3.0, -1.0, 2.0]
-    np.testing.assert_allclose(relighter.target_lighting(env, pose).numpy(), got, atol=1e-12)
+    np.testing.assert_allclose(target_lighting(env, pose).numpy(), got, atol=1e-12)
     # Without sh.rotate: the sun's camera-frame irradiance peaks at the normal facing it, R d.
     d = _sun(30.0, 40.0)
     normals = sh.fibonacci_sphere(4000)
-    e = sh.irradiance(relighter.target_lighting(d, R).numpy(), normals) @ np.array(colour.LUMINANCE)
+    e = sh.irradiance(target_lighting(d, R).numpy(), normals) @ np.array(colour.LUMINANCE)
     peak = normals[np.argmax(e)]
     assert np.degrees(np.arccos(np.clip(peak @ (R @ d), -1, 1))) < 15.0
     assert np.degrees(np.arccos(np.clip(peak @ (R.T @ d), -1, 1))) > 30.0
@@ -325,7 +326,7 @@ def test_06_cli_sequence_steps_the_azimuth_by_360_over_n_from_the_given_azimuth(
 def _working(relighter, photo: np.ndarray, sky_mask: np.ndarray | None = None):
     """The linear photo and its working-resolution image (denoised, as the pipeline relights it) and sky
     (the given mask, else the segmenter's)."""
-    from learned.relighter import working_resolution
+    from physrelight.full_resolution import working_resolution
 
     lin = colour.from_ldr(torch.from_numpy(photo).permute(2, 0, 1)[None].float() / 255.0)
     sky = relighter.sky_mask(lin, sky_mask)
@@ -337,7 +338,7 @@ def test_07_the_renderer_is_fed_the_target_shadow_not_the_source_shadow(relighte
     from learned.neural_renderer import CHANNELS
 
     _, small, small_sky = _working(relighter, photo)
-    target = relighter.target_lighting(_sun(30.0, 40.0)).float()
+    target = target_lighting(_sun(30.0, 40.0)).float()
     seen: list[torch.Tensor] = []
     handle = relighter.renderer.register_forward_pre_hook(lambda mod, args: seen.append(args[0].clone()))
     try:
@@ -371,7 +372,7 @@ def test_08_the_shadow_layer_is_the_source_shadow_and_target_shadow_the_targets(
     lin, small, small_sky = _working(relighter, photo, sky)
     assert small.shape[-2:] != lin.shape[-2:]  # the layers are upsampled from the working resolution
     dec = relighter.decompose_linear(small, small_sky)
-    working = relighter.relight_linear(small, small_sky, relighter.target_lighting(_sun(30.0, 40.0)).float(),
+    working = relighter.relight_linear(small, small_sky, target_lighting(_sun(30.0, 40.0)).float(),
                                        method="shadownet_lambertian")
     target_shadow = working["target_shadow"]  # ShadowNet's for the target (test_07 checks what it is)
 
@@ -387,7 +388,7 @@ def test_08_the_shadow_layer_is_the_source_shadow_and_target_shadow_the_targets(
 
 
 def test_09_black_pixels_take_the_upsampled_relighting_not_zero() -> None:
-    from learned.relighter import transfer_to_full_resolution, working_resolution
+    from physrelight.full_resolution import transfer_to_full_resolution, working_resolution
 
     g = torch.Generator().manual_seed(9)
     full = torch.rand(1, 3, 48, 64, generator=g) * 0.6 + 0.2

@@ -2,8 +2,8 @@
 
 Identities that hold whatever the networks learned: the Lambertian methods are the image
 model applied to the decomposition, linear in the target; the source-lighting ratio maps the
-target into the decomposition's units; sky pixels are never touched; full-resolution
-transfer carries fine detail through a smooth relighting.
+target into the decomposition's units; sky pixels are never touched. (The full-resolution transfer itself is
+specified in tests/physrelight/test_full_resolution.py.)
 """
 
 from __future__ import annotations
@@ -85,44 +85,6 @@ def test_04_relight_to_the_estimated_lighting_reproduces_the_lambertian_reconstr
     torch.testing.assert_close(out["relit"][fg], expect[fg])
 
 
-def test_05_full_resolution_transfer_keeps_detail_through_a_smooth_relighting() -> None:
-    from learned.relighter import transfer_to_full_resolution, working_resolution
-
-    g = torch.Generator().manual_seed(1)
-    full = torch.rand(1, 3, 96, 128, generator=g) * 0.8 + 0.1  # per-pixel detail
-    sky = torch.zeros(1, 1, 96, 128, dtype=torch.bool)
-    small, small_sky = working_resolution(full, sky, 32)
-    assert small.shape[-2:] == (32, 43) and small_sky.shape[-2:] == (32, 43)
-    gain = torch.linspace(0.5, 2.0, 43)[None, None, None, :].expand(1, 3, 32, 43)  # a smooth relighting
-    back = transfer_to_full_resolution(full, small, small * gain, guided=False)
-    up_gain = torch.nn.functional.interpolate(gain, size=(96, 128), mode="bilinear", align_corners=False)
-    torch.testing.assert_close(back, full * up_gain)
-    # The edge-aware (default) transfer follows the photo's edges, not the grid: on a smooth gain over
-    # random texture it stays within 1 % of the bilinear ratio, and a constant gain is kept exactly.
-    guided = transfer_to_full_resolution(full, small, small * gain)
-    assert float((guided - full * up_gain).abs().mean()) < 0.01 * float((full * up_gain).mean())
-    torch.testing.assert_close(transfer_to_full_resolution(full, small, small * 1.7), full * 1.7)
-    # A plain upsampling would have lost the detail: its error is far larger.
-    naive = torch.nn.functional.interpolate(small * gain, size=(96, 128), mode="bilinear", align_corners=False)
-    assert float((naive - full * up_gain).abs().mean()) > 20 * float((back - full * up_gain).abs().mean()) + 1e-3
-
-
-@pytest.mark.parametrize("guided", [True, False])
-def test_05b_black_working_pixels_do_not_bleed_into_lit_neighbours(guided: bool) -> None:
-    """A constant ratio next to a black corner stays that ratio on every lit pixel (1e-5): the black
-    pixels' meaningless ratio is not upsampled into their neighbours (issue 25's study found lit pixels
-    down to a ratio of 0.21 with the guided transfer and 1.06 with the bilinear one)."""
-    from learned.relighter import transfer_to_full_resolution, working_resolution
-
-    g = torch.Generator().manual_seed(2)
-    full = torch.rand(1, 3, 128, 128, generator=g) * 0.8 + 0.1
-    full[..., :32, :32] = 0.0  # 8x8 black working pixels
-    small, _ = working_resolution(full, torch.zeros(1, 1, 128, 128, dtype=torch.bool), 32)
-    back = transfer_to_full_resolution(full, small, small * 1.7, guided=guided)
-    lit = (torch.nn.functional.interpolate(small, size=(128, 128), mode="bilinear", align_corners=False) > 1e-3)
-    torch.testing.assert_close(back[lit], (full * 1.7)[lit], rtol=1e-5, atol=1e-6)
-
-
 def test_06_relight_any_size_photo_and_bad_input(relighter) -> None:
     rng = np.random.default_rng(4)
     photo = (rng.uniform(0.1, 0.9, (50, 70, 3)) * 255).astype(np.uint8)
@@ -183,10 +145,10 @@ def test_08_a_sequence_decomposes_once_and_gives_the_frames_of_separate_relights
 
 
 def test_09_the_quotient_ratio_is_smoothed_at_the_relighters_radius(relighter, photo) -> None:
-    """``Relighter.ratio_radius`` (study 27): the quotient's relit photo is the raw quotient with its ratio
+    """``RelightOptions.ratio_radius`` (study 27): the quotient's relit photo is the raw quotient with its ratio
     passed through ``physrelight.quotient.smooth_ratio`` at that radius; radius 0 is the raw quotient, and a
     negative or fractional radius is refused by name."""
-    from learned import Relighter
+    from learned.relight_options import RelightOptions
     from physrelight import quotient
 
     image, sky = photo
@@ -195,72 +157,66 @@ def test_09_the_quotient_ratio_is_smoothed_at_the_relighters_radius(relighter, p
     raw = quotient.quotient_ratio(out["normals"], source[None].expand(2, -1, -1), target[None].expand(2, -1, -1),
                                   mask=~sky)
     # The ratio is scale-invariant, so the decomposition-unit scale of relight_linear does not enter.
-    want = torch.where(sky, image, image * quotient.smooth_ratio(image, raw, relighter.ratio_radius))
+    want = torch.where(sky, image, image * quotient.smooth_ratio(image, raw, relighter.options.ratio_radius))
     torch.testing.assert_close(out["relit"], want.clamp_min(0), rtol=1e-5, atol=1e-6)
-    assert relighter.ratio_radius == quotient.SMOOTH_RADIUS == 3
-    unsmoothed = Relighter(relighter.inverse, relighter.shadow_net, relighter.prior, relighter.res, ratio_radius=0)
+    assert relighter.options.ratio_radius == quotient.SMOOTH_RADIUS == 3
+    unsmoothed = relighter.with_options(ratio_radius=0)
     got = unsmoothed.relight_linear(image, sky, target, source_lighting=source, method="quotient", known_source=True)
     torch.testing.assert_close(got["relit"], torch.where(sky, image, image * raw).clamp_min(0), rtol=1e-5, atol=1e-6)
     assert not torch.allclose(got["relit"], out["relit"])
     for bad in (-1, 1.5):
         with pytest.raises(ValueError, match="ratio_radius"):
-            Relighter(relighter.inverse, relighter.shadow_net, relighter.prior, relighter.res, ratio_radius=bad)
+            RelightOptions(ratio_radius=bad)
 
 
 def test_10_with_denoise_the_foreground_is_relit_from_the_denoised_photo_and_the_sky_stays_the_photos(relighter,
                                                                                                       photo) -> None:
-    """``Relighter.denoise`` (study 37; off by default): a noisy photo relit to its own lighting on the known track
+    """``RelightOptions.denoise`` (study 37; off by default): a noisy photo relit to its own lighting on the known track
     comes back as the photo denoised by :func:`physrelight.denoise.denoise` at :data:`learned.relighter.DENOISE`,
     bit for bit on the foreground, nearer the clean photo than the noisy one was; its sky pixels stay the noisy
     photo's own. Off (the default), the photo itself comes back, bit for bit."""
-    from learned.relighter import DENOISE
+    from learned.relight_options import DENOISE
     from physrelight.denoise import denoise
 
     image, sky = photo
     g = torch.Generator().manual_seed(5)
     noisy = (image + 0.02 * torch.randn(image.shape, generator=g)).clamp_min(0.0)
     source = _target(4)
-    assert relighter.denoise is None and DENOISE == (2, 3.0)
+    assert relighter.options.denoise is None and DENOISE == (2, 3.0)
     off = relighter.relight_full_resolution(noisy, sky, source, source_lighting=source, method="quotient",
                                             known_source=True)["relit"]
     assert torch.equal(off, noisy) and relighter.denoised(noisy) is noisy
-    try:
-        relighter.denoise = DENOISE
-        out = relighter.relight_full_resolution(noisy, sky, source, source_lighting=source, method="quotient",
-                                                known_source=True)["relit"]
-        clean = denoise(noisy, *DENOISE)
-        fg = ~sky.expand_as(noisy)
-        assert torch.equal(out[fg], clean[fg]) and torch.equal(out[~fg], noisy[~fg])
-        assert float((out - image)[fg].abs().mean()) < float((noisy - image)[fg].abs().mean())
-        assert torch.equal(relighter.denoised(noisy), clean)
-    finally:
-        relighter.denoise = None
+    denoising = relighter.with_options(denoise=DENOISE)
+    out = denoising.relight_full_resolution(noisy, sky, source, source_lighting=source, method="quotient",
+                                            known_source=True)["relit"]
+    clean = denoise(noisy, *DENOISE)
+    fg = ~sky.expand_as(noisy)
+    assert torch.equal(out[fg], clean[fg]) and torch.equal(out[~fg], noisy[~fg])
+    assert float((out - image)[fg].abs().mean()) < float((noisy - image)[fg].abs().mean())
+    assert torch.equal(denoising.denoised(noisy), clean)
 
 
 def test_11_the_level_prior_blends_the_shapes_level_with_the_grey_world(photo) -> None:
-    """``Relighter.level_prior`` (study 39; 0 by default): on the estimated track with a given source level, the
+    """``RelightOptions.level_prior`` (study 39; 0 by default): on the estimated track with a given source level, the
     target's scale is divided by ``g ** beta``, ``g`` the foreground's median implied albedo over 0.18 under the
     estimated shape at the given level (computed here by hand from its definition). beta = 1 is the target
     divided by ``g`` at beta = 0; beta = 1/2 the same with ``sqrt(g)``; photo, source and target scaled together
     scale the output alike (the blend is exposure-equivariant); the known track ignores it; a weight outside
     [0, 1] is refused by name."""
-    from learned import Relighter
+    from learned.relight_options import RelightOptions
+    from learned.relighter import Relighter
     from physrelight import colour
 
-    r = Relighter.load(ratio_radius=0)
-    assert r.level_prior == 0.0
+    r = Relighter.load(options=RelightOptions(ratio_radius=0))
+    assert r.options.level_prior == 0.0
     image, sky = photo
     source, target = _target(4), _target(3)
     dec = r.decompose_linear(image, sky)
     fg = ~sky.expand_as(image)
 
     def relit(beta: float, k: float = 1.0, tgt: torch.Tensor = target, **kw) -> torch.Tensor:
-        r.level_prior = beta
-        try:
-            return r.relight_linear(k * image, sky, k * tgt, source_lighting=k * source, method="quotient",
-                                    decomposition=dec, **kw)["relit"]
-        finally:
-            r.level_prior = 0.0
+        return r.with_options(level_prior=beta).relight_linear(k * image, sky, k * tgt, source_lighting=k * source,
+                                                               method="quotient", decomposition=dec, **kw)["relit"]
 
     # g by hand: the estimate put at the given source's DC luminance, the median of lum(photo) / lum(shading)
     lum = torch.tensor(colour.LUMINANCE, dtype=torch.float64)
@@ -273,10 +229,9 @@ def test_11_the_level_prior_blends_the_shapes_level_with_the_grey_world(photo) -
     for i in range(2):
         one = {k: v[i:i + 1] for k, v in dec.items()}
         for beta in (0.5, 1.0):
-            r.level_prior = beta
-            got = r.relight_linear(image[i:i + 1], sky[i:i + 1], target, source_lighting=source, method="quotient",
-                                   decomposition=one)["relit"]
-            r.level_prior = 0.0
+            got = r.with_options(level_prior=beta).relight_linear(image[i:i + 1], sky[i:i + 1], target,
+                                                                  source_lighting=source, method="quotient",
+                                                                  decomposition=one)["relit"]
             want = r.relight_linear(image[i:i + 1], sky[i:i + 1], target / float(g[i]) ** beta, source_lighting=source,
                                     method="quotient", decomposition=one)["relit"]
             torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-8)
@@ -285,10 +240,8 @@ def test_11_the_level_prior_blends_the_shapes_level_with_the_grey_world(photo) -
     torch.testing.assert_close(relit(0.5, k=4.0), 4.0 * rh, rtol=1e-5, atol=1e-7)
     assert torch.equal(relit(1.0, known_source=True), relit(0.0, known_source=True))
     for bad in (-0.1, 1.5):
-        r.level_prior = bad
         with pytest.raises(ValueError, match="level_prior"):
-            r.relight_linear(image, sky, target, source_lighting=source, method="quotient", decomposition=dec)
-    r.level_prior = 0.0
+            r.with_options(level_prior=bad)
 
 
 def test_12_the_stage_hook_hears_each_stage_in_order(relighter, photo) -> None:
@@ -310,3 +263,31 @@ def test_12_the_stage_hook_hears_each_stage_in_order(relighter, photo) -> None:
         assert heard == ["sky mask"] + ["relighting", "sky"] * 3
     finally:
         relighter.on_stage = None
+
+
+def test_13_the_tuning_is_one_frozen_set_of_options_given_at_construction(relighter, photo) -> None:
+    """``RelightOptions`` holds the tuning (issue 41): each option out of its range is refused by name when the
+    options are made; setting an option on a relighter is refused by name (it would do nothing); ``with_options``
+    gives a relighter with the same networks and the changed options, the original untouched. The keyword
+    arguments of ``relight``/``relight_layers``/``relight_sequence`` are ``RelightRequest``'s: an unknown one is a
+    ``TypeError``, and a sequence takes its azimuths, not ``azimuth_deg``."""
+    from learned.relight_options import DENOISE, RelightOptions, RelightRequest
+
+    for bad in (dict(sky_level="moon"), dict(sky_grow=-0.1), dict(sky_grow=2.0), dict(sky_smooth=-1.0),
+                dict(denoise=(2,)), dict(renderer_gain_ratio=1), dict(level_prior=float("nan")),
+                dict(ratio_radius=True), dict(lighting_estimator="magic")):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            RelightOptions(**bad)
+    with pytest.raises(AttributeError, match="denoise is a relighting option"):
+        relighter.denoise = DENOISE
+    other = relighter.with_options(denoise=DENOISE, sky_grow=0.0)
+    assert other.inverse is relighter.inverse and other.renderer is relighter.renderer
+    assert other.options == RelightOptions(denoise=DENOISE, sky_grow=0.0) and relighter.options == RelightOptions()
+    with pytest.raises(AttributeError):
+        other.options.denoise = None  # frozen
+    assert RelightRequest().method == "proposed" and RelightRequest().exposure == "keep"
+    image, sky = photo
+    with pytest.raises(TypeError, match="azimuth"):
+        relighter.relight(image[:1], _target(3), sky_mask=sky[:1, 0], azimuth=30.0)
+    with pytest.raises(TypeError, match="azimuths_deg"):
+        relighter.relight_sequence(image[:1], _target(3), [0.0], sky_mask=sky[:1, 0], azimuth_deg=30.0)

@@ -210,22 +210,22 @@ def test_10_relighter_estimator_switch():
     network; an unknown name is refused; "source_map" with its switches off (noise 1, the shadow divided)
     gives the same lighting as "network"."""
     from learned import Relighter
-    from learned.relighter import LIGHTING_ESTIMATORS
+    from learned.relight_options import LIGHTING_ESTIMATORS, RelightOptions
 
     old = Relighter.load()
-    assert old.lighting_estimator == "source_map" and Relighter.load(lighting_estimator="network").lighting_estimator \
-        == "network"
+    assert old.options.lighting_estimator == "source_map"
+    assert Relighter.load(options=RelightOptions(lighting_estimator="network")).options.lighting_estimator == "network"
     with pytest.raises(ValueError, match="lighting_estimator must be one of"):
-        Relighter(old.inverse, old.shadow_net, old.prior, lighting_estimator="magic")
+        RelightOptions(lighting_estimator="magic")
     off = SourceLightingConfig(noise=1.0, use_shadow=True, robust=False, sky=False)
-    new = Relighter(old.inverse, old.shadow_net, old.prior, old.res, lighting_estimator="source_map",
-                    source_config=off)
+    new = Relighter(old.inverse, old.shadow_net, old.prior, old.res,
+                    options=RelightOptions(lighting_estimator="source_map", source_config=off))
     assert set(LIGHTING_ESTIMATORS) == {"network", "source_map"}
     g = torch.Generator().manual_seed(0)
     image = torch.rand(2, 3, 64, 64, generator=g) * 0.6 + 0.05
     sky = torch.zeros(2, 1, 64, 64, dtype=torch.bool)
     sky[:, :, :16] = True
-    a = Relighter(old.inverse, old.shadow_net, old.prior, old.res, lighting_estimator="network")
+    a = old.with_options(lighting_estimator="network")
     la = a.decompose_linear(image, sky)["lighting"]
     lb = new.decompose_linear(image, sky)["lighting"]
     assert torch.allclose(la, lb, rtol=1e-4, atol=1e-6 * float(la.abs().max()))

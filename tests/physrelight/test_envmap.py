@@ -295,3 +295,34 @@ def test_17_both_lookups_give_a_pole_its_rows_mean() -> None:
     assert torch.allclose(envmap.sample(env, down)[0], env[-1].mean(0))
     assert torch.allclose(envmap.sample_bspline(env, up)[0], (5 * env[0].mean(0) + env[1].mean(0)) / 6)
     assert torch.allclose(envmap.sample_bspline(env, down)[0], (5 * env[-1].mean(0) + env[-2].mean(0)) / 6)
+
+
+def test_18_an_env_maps_sun_is_its_texels_over_four_times_the_ring_within_three_degrees() -> None:
+    """:func:`physrelight.envmap.split_sun`, the one sun finder of the library (targets, synth, bench), pinned at
+    its thresholds on a dim sky (0.01) with a peak texel of 100: of the texels within 3 degrees of the peak, those
+    at 5 times the surrounding sky (the 3-6 degree ring's median) are the sun's and those at 3 times are not; a
+    bright texel 9.5 degrees away is not. The sun carries exactly the excess of its texels over the ring (the sky
+    keeps the ring's value there), and a sun under 1 % of the map's energy is no sun."""
+    h, w = 256, 512
+    env = np.full((h, w, 3), 0.01)
+    r, c = 60, 100  # 47.5 degrees up: a texel is 0.70 degrees high, 0.47 wide
+    env[r, c] = 100.0
+    env[r, c + 1] = env[r + 1, c] = 0.05  # within a degree, 5x the ring: the sun's
+    env[r, c - 2] = env[r - 1, c] = 0.03  # within a degree, 3x the ring: not
+    env[r, c + 20] = 30.0  # 9.5 degrees away: not
+    dw = envmap._solid_angles(h, w)
+    got = envmap.split_sun(env)
+    sun_texels = ((r, c), (r, c + 1), (r + 1, c))
+    want = sum((env[rc] - 0.01) * dw[rc] for rc in sun_texels)
+    np.testing.assert_allclose(got.irradiance, want, rtol=1e-9)
+    kept = env.copy()
+    for rc in sun_texels:
+        kept[rc] = 0.01
+    np.testing.assert_allclose(got.sky, kept, rtol=1e-6)
+    # the energy share: a sun of 1.5 % is a sun, one of 0.5 % is not
+    total = float((np.full((h, w), 0.01) * dw).sum())
+    for share, is_sun in ((0.015, True), (0.005, False)):
+        one = np.full((h, w, 3), 0.01)
+        one[r, c] = 0.01 + share / (1 - share) * total / dw[r, c]
+        assert (envmap.split_sun(one).direction is not None) == is_sun, share
+

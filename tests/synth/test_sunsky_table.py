@@ -70,12 +70,13 @@ def test_03_a_sun_targets_sky_keeps_mitsubas_level_against_its_sun(elevation_deg
     target, seen through a level camera, is that sky along each ray plus the sun's disc."""
     import torch
 
-    from learned.relighter import _sun_rgb, sun_lighting, target_sky
+    from physrelight.sky_view import target_sky
+    from physrelight.target_lighting import sun_lighting, sun_rgb
     from physrelight import camera, panorama
     from physrelight.sky_model import horizon_clamped, sun_disc
 
     ref, s = _mitsuba(elevation_deg, 200.0)
-    sky_sh = sun_lighting(s) - np.asarray(sh.project_sun(s, _sun_rgb(s), order=2))
+    sky_sh = sun_lighting(s) - np.asarray(sh.project_sun(s, sun_rgb(s), order=2))
     ratio = float(sh.irradiance(sky_sh, UP)[0] @ LUM)
     want = float(sh.irradiance(sh.project_envmap(ref, order=2), UP)[0] @ LUM)
     assert abs(ratio / want - 1) < 0.02, (ratio, want)
@@ -83,7 +84,7 @@ def test_03_a_sun_targets_sky_keeps_mitsubas_level_against_its_sun(elevation_deg
     T = panorama.level_camera(10.0, 0.0)
     view = target_sky(s, K, T, 48, 64).double()
     rays = horizon_clamped(panorama.camera_rays(K, T, 48, 64, 1))[..., 0, :]
-    disc = sun_disc(rays, s)[..., None] * torch.from_numpy(_sun_rgb(s))
+    disc = sun_disc(rays, s)[..., None] * torch.from_numpy(sun_rgb(s))
     np.testing.assert_allclose(view.numpy(), sunsky_radiance(rays.numpy(), s) + disc.numpy(), rtol=1e-5, atol=1e-7)
     assert float(view.min()) > 0  # rays below the horizon see the sky just above it, never black
 
@@ -91,12 +92,12 @@ def test_03_a_sun_targets_sky_keeps_mitsubas_level_against_its_sun(elevation_deg
 @pytest.mark.parametrize("elevation_deg", [3.0, 8.0, 30.0, 60.0])
 def test_04_a_sun_targets_irradiance_is_mitsubas_on_every_normal(elevation_deg: float) -> None:
     """What the quotient shades a ``--sun`` target with (the sky's order-2 SH plus the sun by its exact
-    cosine, :func:`learned.relighter.sun_lighting`, ``_sun_rgb``) against Mitsuba's brute-force irradiance of
+    cosine, :func:`physrelight.target_lighting.sun_lighting`, ``sun_rgb``) against Mitsuba's brute-force irradiance of
     the same ``sunsky`` (texel sum plus its sun), white-balanced to the zenith sun, on 256 normals over the
     sphere, relative to the mean: luminance within 5 % everywhere (measured <= 3.5 %), each channel's mean
     within 5 % from 8 degrees up (measured <= 2.5 %) and within 8 % at 3 degrees up (measured 6.9 %, blue:
     the two suns' colours differ most near the horizon; test_sky_model 08)."""
-    from learned.relighter import _sun_rgb, sun_lighting
+    from physrelight.target_lighting import sun_lighting, sun_rgb
 
     i = np.arange(256) + 0.5
     z, phi = 1 - 2 * i / 256, np.pi * (1 + 5 ** 0.5) * i
@@ -105,8 +106,8 @@ def test_04_a_sun_targets_irradiance_is_mitsubas_on_every_normal(elevation_deg: 
     s = light.sun_direction
     white = sunsky_table.zenith_sun_colour()
     true = light.irradiance_reference(n) / white / float(light.sun_irradiance / white @ LUM)
-    sky_sh = sun_lighting(s) - np.asarray(sh.project_sun(s, _sun_rgb(s), order=2))
-    model = np.asarray(sh.irradiance(sky_sh, n)) + np.clip(n @ s, 0, None)[:, None] * _sun_rgb(s)
+    sky_sh = sun_lighting(s) - np.asarray(sh.project_sun(s, sun_rgb(s), order=2))
+    model = np.asarray(sh.irradiance(sky_sh, n)) + np.clip(n @ s, 0, None)[:, None] * sun_rgb(s)
     assert np.abs(model @ LUM - true @ LUM).max() / (true @ LUM).mean() < 0.05
     per_channel = np.abs(model - true).mean(0) / true.mean(0)
     assert per_channel.max() < (0.08 if elevation_deg < 5 else 0.05), per_channel

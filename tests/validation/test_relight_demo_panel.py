@@ -21,7 +21,7 @@ def scene() -> dict:
 
 
 def test_01_the_painted_sky_is_the_path_traced_targets_sky(scene: dict) -> None:
-    """On the sky, the target's sky map seen through the camera (learned.relighter.target_sky, the relight
+    """On the sky, the target's sky map seen through the camera (physrelight.sky_view.target_sky, the relight
     command's function) at the photo's exposure is what Mitsuba renders there. The smooth skies (evening sun,
     haze): median |difference| of display values under 0.002, mean under 0.02 (mask-edge pixels, part sky, part
     landmark, make the mean). The forest map's leaves are finer than a 32-px pixel: the path tracer averages

@@ -2,14 +2,14 @@
 
 The learned pipeline relights at a working resolution (64 px, what its networks were trained at)
 and brings the result back to the photo's size by ratio transfer
-(:func:`learned.relighter.transfer_to_full_resolution`): ``full * up(relit_small / small)``. This
+(:func:`physrelight.full_resolution.transfer_to_full_resolution`): ``full * up(relit_small / small)``. This
 study measures, on a synthetic folder rendered at full resolution (``physrelight synth DIR --res
 256``), against the path-traced target radiance:
 
 * ``working``: the working-resolution relighting scored at the working resolution, against the
   full-resolution target box-downsampled to it (the 64-px figure of the same pairs: same scenes,
   cameras, photo nuisances and render noise; the photo seen at 64 px is the full one area-averaged,
-  :func:`learned.relighter.working_resolution`);
+  :func:`physrelight.full_resolution.working_resolution`);
 * ``bilinear`` (before): the working result brought to full size with a bilinear ratio;
 * ``guided`` (after): the same with the ratio's log upsampled by the guided filter on the photo's
   log luminance (:mod:`physrelight.guided_filter`);
@@ -95,7 +95,7 @@ def low_res_target(pair: Pair, factor: int) -> torch.Tensor:
 
 def low_res_foreground(foreground: torch.Tensor, factor: int) -> torch.Tensor:
     """``(B, 1, H / f, W / f)`` bool: the low-resolution pixels at least half covered by ``foreground``
-    ``(B, 1, H, W)`` (the majority rule :func:`learned.relighter.working_resolution` applies to the sky)."""
+    ``(B, 1, H, W)`` (the majority rule :func:`physrelight.full_resolution.working_resolution` applies to the sky)."""
     return box_down(foreground.float(), factor) >= 0.5
 
 
@@ -111,22 +111,22 @@ def _log_luminance(x: torch.Tensor, eps: float) -> torch.Tensor:
 def transfer_fast_guided(full: torch.Tensor, small: torch.Tensor, relit_small: torch.Tensor, eps: float = 1e-3,
                          guide_eps: float | None = None, radius: int = 1) -> torch.Tensor:
     """Ratio transfer whose guided filter is fitted at the working resolution (the *fast guided filter*,
-    He and Sun 2015): a candidate studied here beside :func:`learned.relighter.transfer_to_full_resolution`.
+    He and Sun 2015): a candidate studied here beside :func:`physrelight.full_resolution.transfer_to_full_resolution`.
 
     The shipped guided transfer filters the *bilinearly upsampled* log ratio at full resolution: the
     bilinear ramp across an edge lies on both sides of it, where the guide is flat, and a guided filter
     keeps what is flat in the guide, so the ramp survives beside the edge. Here the local affine model
     ``log ratio = a log L + b`` is fitted on the working grid (guide: the full photo's log luminance
     area-averaged to it; window ``(2 radius + 1)^2`` working pixels; ridge ``guide_eps``, default
-    :data:`learned.relighter.GUIDE_EPS`), its window-averaged ``a, b`` upsampled bilinearly, and applied
+    :data:`physrelight.full_resolution.GUIDE_EPS`), its window-averaged ``a, b`` upsampled bilinearly, and applied
     to the full-resolution guide: where the model holds, the step comes back at the photo's edge.
 
-    Shapes and the black-pixel fallback as :func:`learned.relighter.transfer_to_full_resolution`:
+    Shapes and the black-pixel fallback as :func:`physrelight.full_resolution.transfer_to_full_resolution`:
     ``full (B, 3, H, W)``, ``small``/``relit_small (B, 3, h, w)`` -> ``(B, 3, H, W)``; ``relit_small``
     itself when the sizes agree. A working pixel darker than ``eps`` (no ratio) gets no weight in the fit,
     so a constant ratio stays constant next to black pixels too (``a = 0``).
     """
-    from learned.relighter import GUIDE_EPS
+    from physrelight.full_resolution import GUIDE_EPS
     from physrelight.guided_filter import box_filter
 
     if full.shape[-2:] == small.shape[-2:]:
@@ -168,10 +168,10 @@ def transfer_variants(full: torch.Tensor, small: torch.Tensor, relit_small: torc
 
     Returns:
         ``{"bilinear", "guided", "fast_guided"}``: ``(B, 3, H, W)`` linear (sky pixels = ``full``):
-        :func:`learned.relighter.transfer_to_full_resolution` with ``guided=False`` (before) and
+        :func:`physrelight.full_resolution.transfer_to_full_resolution` with ``guided=False`` (before) and
         ``guided=True`` (after, shipped), and :func:`transfer_fast_guided` (candidate).
     """
-    from learned.relighter import transfer_to_full_resolution
+    from physrelight.full_resolution import transfer_to_full_resolution
 
     out = {name: transfer_to_full_resolution(full, small, relit_small, guided=guided)
            for name, guided in (("bilinear", False), ("guided", True))}
@@ -198,7 +198,7 @@ def relight_variants(relighter: Any, image: torch.Tensor, sky: torch.Tensor, tar
         ``working`` ``(1, 3, h, w)``; ``bilinear``, ``guided``, ``fast_guided`` (:func:`transfer_variants`),
         ``direct`` ``(1, 3, H, W)``; all linear.
     """
-    from learned.relighter import working_resolution
+    from physrelight.full_resolution import working_resolution
 
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -296,7 +296,7 @@ def time_configs(relighter: Any, pairs: Sequence[Pair], working_res: int = WORKI
     ``{method: {config: seconds}}`` for :data:`CONFIGS`; ``working`` is the working-resolution step alone
     (resize, decompose, relight), ``bilinear``/``guided``/``fast_guided`` that plus the transfer.
     """
-    from learned.relighter import transfer_to_full_resolution, working_resolution
+    from physrelight.full_resolution import transfer_to_full_resolution, working_resolution
 
     out: dict[str, dict[str, float]] = {}
     for method in METHODS:
@@ -390,7 +390,7 @@ def run_full_resolution(data: str | Path, out_dir: str | Path, command: str, wor
         ValueError: the folder's resolution is not a multiple of ``working_res`` above it.
     """
     from learned import Relighter
-    from learned.relighter import working_resolution
+    from physrelight.full_resolution import working_resolution
 
     t_start = time.perf_counter()
     relighter = Relighter.load(weights)  # a bad weights folder fails before any loading

@@ -45,7 +45,9 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-from learned.relighter import estimate_pitch, fitted_sky, target_sky, working_resolution
+from physrelight.full_resolution import working_resolution
+from physrelight.horizon import estimate_pitch
+from physrelight.sky_view import fitted_sky, target_sky
 from learned.source_lighting import grey_world_level
 from physrelight import colour, envmap, metrics, panorama, sh
 

@@ -173,7 +173,7 @@ def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
     for key, title in (("iou", "IoU"), ("boundary_f", "boundary F"), ("sky_called_without_sky", "sky called without sky")):
         lines += ["", f"{title}:", ""] if key != "iou" else []
         lines += _table(groups, s, ("as is", *CAMERA_VARIANTS), lambda g, r, key=key: stability(g, r, key), "camera")
-    lines += ["", "Pitch estimated from the sky's horizon (`learned.relighter.estimate_pitch`), error in degrees "
+    lines += ["", "Pitch estimated from the sky's horizon (`physrelight.horizon.estimate_pitch`), error in degrees "
               "(absolute, then signed):", ""]
     lines += _table(groups, s, ("abs_error_deg", "error_deg"), lambda g, r: g["pitch"][r], "pitch", 2)
     lines += ["", "## (b) Lighting from a real photo", "",

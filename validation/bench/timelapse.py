@@ -288,7 +288,7 @@ def estimate_lighting(relighter: Any, linear: torch.Tensor, sky: torch.Tensor) -
 
     ``linear (1, 3, H, W)`` the linearised photo, ``sky (1, 1, H, W)`` bool.
     """
-    from learned.relighter import working_resolution
+    from physrelight.full_resolution import working_resolution
 
     small, small_sky = working_resolution(relighter.denoised(linear), sky, relighter.res)
     return relighter.decompose_linear(small.float(), small_sky.bool())["lighting"].float()
@@ -340,7 +340,7 @@ class TimelapsePair:
 
     def sun_lighting(self, index: int) -> torch.Tensor:
         """``(1, 9, 3)`` the sun alone within :meth:`lighting` (zeros without one): the truth's sun when given,
-        else the sun of the sky model fitted to the estimate (:meth:`learned.Relighter.target_sun`, as
+        else the sun of the sky model fitted to the estimate (:func:`physrelight.target_lighting.target_sun`, as
         ``relight`` takes an SH target's sun)."""
         return self.lightings[f"{'given' if self.given else 'estimated'}_sun:{index}"]
 
@@ -372,13 +372,15 @@ class TimelapsePair:
 
 def _sequence_inputs(relighter: Any, seq: TimelapseSequence) -> tuple[list[torch.Tensor], dict[str, torch.Tensor]]:
     """Per frame: the segmenter's sky and the lightings (estimated, and the truth when the sequence has it)."""
+    from physrelight.target_lighting import target_sun
+
     skies, lights = [], {}
     for k, f in enumerate(seq.frames):
         sky = relighter.photo_sky(f.linear())[0].bool()
         skies.append(sky)
         est = estimate_lighting(relighter, f.linear(), sky)
         lights[f"estimated:{k}"] = est
-        sun = relighter.target_sun(est[0].double())
+        sun = target_sun(est[0].double())
         lights[f"estimated_sun:{k}"] = torch.zeros_like(est) if sun is None else sun.float()[None]
         if f.truth is not None:
             lights[f"given:{k}"] = torch.from_numpy(f.truth["sh"]).float()[None]

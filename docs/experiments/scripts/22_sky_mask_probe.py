@@ -19,7 +19,7 @@ import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))
 from learned import sky_segmentation as ss  # noqa: E402
-from learned.data import resize_short_side  # noqa: E402
+from physrelight.full_resolution import resize_short_side  # noqa: E402
 from physrelight import io, metrics  # noqa: E402
 from synth.panorama_crops import TRAINING_DIR, load_panorama, make_crops  # noqa: E402
 

@@ -18,7 +18,8 @@ import numpy as np
 import torch
 
 from learned import Relighter
-from learned.relighter import estimate_pitch, fitted_sky
+from physrelight.horizon import estimate_pitch
+from physrelight.sky_view import fitted_sky
 from learned.sky_gan import smooth_sky
 from physrelight import colour, metrics, panorama, sh
 from synth.panorama_crops import make_crops, shipped_panoramas

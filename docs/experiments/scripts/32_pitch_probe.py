@@ -11,7 +11,7 @@ import numpy as np
 import torch
 
 from learned import Relighter
-from learned.relighter import estimate_pitch
+from physrelight.horizon import estimate_pitch
 from synth.panorama_crops import make_crops, shipped_panoramas
 
 QUANTILES = (0.9, 0.95, 0.98, 1.0)

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from learned import Relighter
-from learned.relighter import SKY_BOUND_MARGIN_DEG, estimate_pitch, pitch_from_verticals
+from physrelight.horizon import SKY_BOUND_MARGIN_DEG, estimate_pitch, pitch_from_verticals
 from real_crop_scores import bench_crops, crop_panoramas
 
 MARGINS = (0.0, 2.0, 5.0, float("inf"))  # inf: the vanishing point whenever it has one

@@ -13,7 +13,8 @@ import numpy as np
 import torch
 
 from learned import Relighter
-from learned.relighter import estimate_pitch, working_resolution
+from physrelight.full_resolution import working_resolution
+from physrelight.horizon import estimate_pitch
 from learned.source_lighting import camera_directions, sky_observations
 from physrelight import colour, panorama, sh
 from physrelight.sky_model import fit_sky, sky_view

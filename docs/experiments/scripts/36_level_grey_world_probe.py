@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from learned import Relighter
-from learned.relighter import working_resolution
+from physrelight.full_resolution import working_resolution
 from physrelight import colour, image_model
 from real_crop_scores import bench_crops, crop_panoramas
 from validation.bench.real_metrics import level_stops

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from PIL import Image
 
-from learned.relighter import DENOISE
+from learned.relight_options import DENOISE
 from physrelight import colour, io
 from physrelight.denoise import denoise, noise_sigma
 from real_crop_scores import bench_crops, crop_panoramas

@@ -11,7 +11,7 @@ spread.
 import sys, numpy as np, torch
 sys.path.insert(0,"docs/experiments/scripts")
 from learned import Relighter
-from learned.relighter import exposure_scale
+from physrelight.exposure import exposure_scale
 from physrelight import colour, image_model
 torch.set_num_threads(1)
 r=Relighter.load(); L=torch.tensor(colour.LUMINANCE)
@@ -34,7 +34,7 @@ mode=sys.argv[1]
 E,X=[],[]
 if mode=="real":
     from real_crop_scores import bench_crops, crop_panoramas
-    from learned.relighter import working_resolution
+    from physrelight.full_resolution import working_resolution
     _,panos=crop_panoramas(False)
     for pano,crop in bench_crops(panos):
         if crop.stratum=="no_sky" or crop.sky.all(): continue

@@ -20,7 +20,7 @@ for pano,crop in bench_crops(panos):
     src=torch.from_numpy(crop.lighting_sh(2)*crop.gain[None,:]).float()
     res=r.relight_full_resolution(lin,seg,src,source_lighting=src,method="quotient")
     w=res["working"]; img=res["working_image"]; sky=res["working_sky"]
-    from learned.relighter import exposure_scale
+    from physrelight.exposure import exposure_scale
     scale=exposure_scale(src[None] if src.ndim==2 else src, w["lighting"], src[None] if src.ndim==2 else src)[:,None,None]
     g=float(r.grey_world_gain(img,sky,w,scale)[0,0,0])
     lum=lambda x:(x[0]*L[:,None,None]).sum(0)[fg].mean()

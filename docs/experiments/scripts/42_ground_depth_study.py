@@ -38,7 +38,7 @@ probe = importlib.import_module("42_ground_depth_probe")
 from screen_space_shadow_study import ap_table  # noqa: E402
 
 from learned import Relighter  # noqa: E402
-from learned.relighter import exposure_scale  # noqa: E402
+from physrelight.exposure import exposure_scale  # noqa: E402
 from physrelight.quotient import SMOOTH_RADIUS, quotient_relight  # noqa: E402
 from physrelight.stats import paired_bootstrap  # noqa: E402
 from validation.bench.protocols import cross_pairs  # noqa: E402

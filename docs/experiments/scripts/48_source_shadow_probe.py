@@ -5,7 +5,7 @@ source shadow divided out, floors and powers, on a synth folder's cross pairs.
 """
 import sys, numpy as np, torch
 from learned import Relighter
-from learned.relighter import exposure_scale
+from physrelight.exposure import exposure_scale
 from learned.networks import repair_top_rows
 from learned.neural_renderer import render_relit
 from physrelight.quotient import SMOOTH_RADIUS, quotient_relight

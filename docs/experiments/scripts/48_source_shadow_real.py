@@ -8,7 +8,8 @@ import sys, numpy as np, torch
 sys.path.insert(0,"docs/experiments/scripts")
 from real_crop_scores import bench_crops, crop_panoramas
 from learned import Relighter
-from learned.relighter import exposure_scale, working_resolution, transfer_to_full_resolution
+from physrelight.exposure import exposure_scale
+from physrelight.full_resolution import transfer_to_full_resolution, working_resolution
 from learned.networks import repair_top_rows
 from learned.neural_renderer import render_relit
 from physrelight import colour

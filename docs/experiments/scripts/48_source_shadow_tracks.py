@@ -5,7 +5,7 @@ estimated track, the sun's part on the known one), against none, on a synth fold
 """
 import sys, numpy as np, torch
 from learned import Relighter
-from learned.relighter import exposure_scale
+from physrelight.exposure import exposure_scale
 from physrelight.quotient import SMOOTH_RADIUS, quotient_relight
 from physrelight.stats import paired_bootstrap
 from validation.bench.data import load_dataset

@@ -9,7 +9,7 @@ from real_crop_scores import bench_crops, crop_panoramas
 import importlib; T=importlib.import_module('49_colour_threshold_probe')
 from learned import Relighter
 import learned.sky_segmentation as ss
-from learned.data import resize_short_side
+from physrelight.full_resolution import resize_short_side
 from physrelight import colour
 import skimage.data as d
 torch.set_num_threads(2)

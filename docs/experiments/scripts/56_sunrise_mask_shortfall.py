@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_crop_scores import bench_crops, crop_panoramas  # noqa: E402
 
 from learned import Relighter  # noqa: E402
-from learned.data import resize_short_side  # noqa: E402
+from physrelight.full_resolution import resize_short_side  # noqa: E402
 from learned.sky_segmentation import SEGMENT_RES, sky_mask_full_resolution  # noqa: E402
 from physrelight import metrics  # noqa: E402
 

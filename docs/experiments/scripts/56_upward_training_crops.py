@@ -9,7 +9,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_crop_scores import crop_panoramas
 from synth.panorama_crops import make_crops
 from learned import Relighter
-from learned.data import resize_short_side
+from physrelight.full_resolution import resize_short_side
 from learned.sky_segmentation import SEGMENT_RES, sky_mask_full_resolution
 from physrelight import metrics
 torch.set_num_threads(2)

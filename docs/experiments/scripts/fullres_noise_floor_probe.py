@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from learned import Relighter
-from learned.relighter import working_resolution
+from physrelight.full_resolution import working_resolution
 from physrelight import colour, metrics
 from synth.dataset import SynthDataset
 from validation.bench import full_resolution as fr

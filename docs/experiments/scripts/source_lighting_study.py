@@ -32,7 +32,8 @@ from learned import Relighter
 from learned.data import SynthDataset, load_photo
 from learned.evaluate import load_ground_truth, shading_error
 from learned.objectives import decompose_and_solve
-from learned.relighter import repair_top_rows, working_resolution
+from learned.networks import repair_top_rows
+from physrelight.full_resolution import working_resolution
 from learned.source_lighting import SourceLightingConfig, solve_source_lighting
 
 RESULTS = Path("docs/experiments/results")

@@ -1,0 +1,93 @@
+"""The target's sky as the photo's camera sees it: what replaces a relit photo's sky.
+
+An env-map or sun target says what its sky looks like (:func:`target_sky`); any target's order-2 SH implies a sky
+through the fitted outdoor sky model (:func:`fitted_sky`). Both come in the target's units, ``(H, W, 3)``, one ray
+per pixel of a pinhole camera (``K (3, 3)``, ``world_to_camera`` ``(4, 4)`` or ``(3, 3)``).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+import torch
+
+from physrelight.sky_model import FIT_GLOW_EXPONENT, horizon_clamped, sun_disc
+from physrelight.target_lighting import (clear_sky_sun, overcast_level, rotate_azimuth, sky_map_kind, sun_rgb,
+                                         target_lighting, turned_camera)
+
+__all__ = ["SKY_RENDERINGS", "fitted_sky", "rendered_sky", "target_sky"]
+
+
+def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: int, sky: str = "clear",
+               azimuth_deg: float = 0.0) -> torch.Tensor:
+    """``(height, width, 3)`` the target's own sky as the photo's camera sees it (target units).
+
+    An env map is looked up through the pinhole camera (``K``, ``world_to_camera``) by
+    :func:`physrelight.panorama.view`, one ray per pixel, bilinearly where a pixel covers a texel or more
+    and by the smooth cubic B-spline where the view magnifies the map
+    (:func:`physrelight.panorama.texel_magnification` above 1: a 640-px photo at 60 degrees sees a 1024-wide
+    map's texel over 3.4 pixels), so a bright texel is not drawn as a clipped square. A sun target's sky is
+    evaluated along each ray (:func:`physrelight.sky_model.sunsky_radiance`, or the CIE overcast sky at
+    :func:`physrelight.target_lighting.sun_sky_map`'s level), smooth at any resolution, plus the sun's disc for a
+    clear sky (radius :data:`physrelight.sky_model.SUN_RADIUS_DEG`, luminance 1, the sun's colour).
+    ``azimuth_deg`` turns the target about +Y as :func:`physrelight.target_lighting.rotate_azimuth` does (the
+    camera is turned the other way, :func:`physrelight.target_lighting.turned_camera`).
+
+    Raises:
+        ValueError: an SH target (it has no sky to render).
+    """
+    from physrelight import envmap, panorama
+
+    kind = sky_map_kind(target)
+    if kind == "sh":
+        raise ValueError("an SH target has no sky to render: use sky source 'fit', 'gan' or 'keep'")
+    R = turned_camera(world_to_camera, azimuth_deg)
+    if kind == "env":
+        env = envmap.read(target) if isinstance(target, (str, os.PathLike)) else np.asarray(target)
+        smooth = panorama.texel_magnification(K, env.shape[1]) > 1.0
+        return torch.as_tensor(panorama.view(torch.as_tensor(env, dtype=torch.float32), K, R, height, width, 1,
+                                             interpolation="bspline" if smooth else "bilinear"))
+    rays = horizon_clamped(panorama.camera_rays(K, R, height, width, 1))
+    if sky == "overcast":
+        from physrelight.sky_model import overcast_sky
+
+        d = rays[..., 0, :].double().numpy()
+        return torch.from_numpy(overcast_sky(d) * overcast_level()).float()[..., None].expand(-1, -1, 3).contiguous()
+    # the clear sky along each ray itself (not through a lat-long map): smooth at any resolution
+    from physrelight.sky_model import sunsky_radiance
+
+    d = clear_sky_sun(target)
+    out = torch.from_numpy(sunsky_radiance(rays[..., 0, :].double().numpy(), d)).float()
+    return out + (sun_disc(rays[..., 0, :], d)[..., None] * torch.from_numpy(sun_rgb(d))).to(out.dtype)
+
+
+def fitted_sky(coeffs: Any, K: Any, world_to_camera: Any, height: int, width: int,
+               glow_exponent: float = FIT_GLOW_EXPONENT) -> torch.Tensor:
+    """``(height, width, 3)`` the sky implied by world-frame order-2 SH ``coeffs (9, 3)`` as the photo's
+    camera (``K``, ``world_to_camera``) sees it, in the coefficients' units: the outdoor sky model
+    fitted to them (:func:`physrelight.sky_model.fit_sky`), one ray per pixel
+    (:func:`physrelight.sky_model.sky_view`). Smooth by construction."""
+    from physrelight import panorama
+    from physrelight.sky_model import fit_sky, sky_view
+
+    fit = fit_sky(coeffs, glow_exponent)
+    return sky_view(fit, panorama.camera_rays(K, world_to_camera, height, width, 1)).float()
+
+
+SKY_RENDERINGS = ("target", "fit")
+
+
+def rendered_sky(source: str, target: Any, K: Any, world_to_camera: Any, height: int, width: int,
+                 sky: str = "clear", azimuth_deg: float = 0.0) -> torch.Tensor:
+    """``(height, width, 3)`` a relit photo's new sky rendered from its target (target units): ``source``
+    ``"target"``, the target's own sky (:func:`target_sky`; an env map or a sun direction), or ``"fit"``, the sky
+    model fitted to the target's world-frame SH (:func:`fitted_sky`; any target), the target turned by
+    ``azimuth_deg`` about +Y either way."""
+    if source not in SKY_RENDERINGS:
+        raise ValueError(f"a rendered sky's source must be one of {SKY_RENDERINGS}, got {source!r}")
+    if source == "target":
+        return target_sky(target, K, world_to_camera, height, width, sky, azimuth_deg)
+    turned = rotate_azimuth(target, azimuth_deg) if azimuth_deg else target
+    return fitted_sky(target_lighting(turned, None, sky), K, world_to_camera, height, width)
