@@ -24,11 +24,11 @@ The likelihood, in log space over blocks of sky pixels (:func:`sky_blocks`): a r
 pull), ``sigma`` = :data:`LOG_SIGMA`; a clipped channel (display value >= ``clip_level``) is a bound,
 "at least this bright": it costs only where the model is darker than the bound (one-sided), it is never
 dropped. Neighbouring pixels of a real sky are not independent (clouds, haze, the tone curve), so the summed
-cost is scaled to :data:`EFFECTIVE_SAMPLES` independent observations (a tempered likelihood; the
-number sets how wide the posterior is, checked by the tests' coverage). Priors: the sun uniform over the
-sky's solid angle (elevation 2-90 degrees), the turbidity uniform on 2-6, the mix uniform on
-:data:`MIXES`. The posterior over the sun's position marginalises turbidity and mix, the sunless ``m = 1``
-included (it adds the same to every cell: an overcast sky gives a flat posterior).
+cost is scaled to :data:`EFFECTIVE_SAMPLES_PER_SR` independent observations per steradian of sky (a tempered
+likelihood; the number sets how wide the posterior is, checked by the tests' coverage). Priors: the sun
+uniform over the sky's solid angle (elevation 2-90 degrees), the turbidity uniform on 2-6, the mix uniform
+on :data:`MIXES`. The posterior over the sun's position marginalises turbidity and mix, the sunless
+``m = 1`` included (it adds the same to every cell: an overcast sky gives a flat posterior).
 
 Conventions: world frame Y up, azimuth as :func:`physrelight.envmap.direction_from_angles` (0 = world -Z,
 90 = +X: clockwise seen from above). ``relight --sun ELEV AZIM`` counts the azimuth from straight ahead of the
@@ -53,7 +53,7 @@ from physrelight.envmap import direction_from_angles
 from physrelight.panorama import camera_rays, level_camera, view_intrinsics
 from physrelight.sky_model import overcast_sky, sun_colour
 
-__all__ = ["AZIMUTH_STEP_DEG", "CLIP_LEVEL", "DARK_SKY_LEVEL", "EFFECTIVE_SAMPLES", "ELEVATIONS_DEG", "LOG_SIGMA",
+__all__ = ["AZIMUTH_STEP_DEG", "CLIP_LEVEL", "DARK_SKY_LEVEL", "EFFECTIVE_SAMPLES_PER_SR", "ELEVATIONS_DEG", "LOG_SIGMA",
            "MAX_BLOCKS_PER_SIDE", "MAX_EXPONENT", "MIN_EXPONENT", "MIN_SKY_PIXELS", "MIXES",
            "SUNSKY_TURBIDITY_TABLE", "SunPosterior", "estimate_sun_from_sky", "hosek_wilkie_sky", "sky_blocks"]
 
@@ -69,9 +69,10 @@ MIXES = (0.0, 0.25, 0.5, 0.75, 1.0)
 """The overcast mixes ``m`` tried (1 = the CIE overcast sky alone: no sun)."""
 LOG_SIGMA = 0.05
 """Scale of the Cauchy cost of a log residual: 5 % (a real clear sky about the smooth model, clouds aside)."""
-EFFECTIVE_SAMPLES = 10.0
-"""Independent observations the sky's blocks are worth (the tempered likelihood's total weight)."""
-MIN_EXPONENT, MAX_EXPONENT = 0.5, 2.0
+EFFECTIVE_SAMPLES_PER_SR = 20.0
+"""Independent observations a steradian of sky is worth (the tempered likelihood's total weight is this times the
+sky's solid angle: half the frame of a 60-degree view is about 0.45 sr, 9 observations; a sliver of sky says little)."""
+MIN_EXPONENT, MAX_EXPONENT = 0.7, 1.4
 """Range of the photo's gamma-like exponent ``g`` (``I = a L^g``)."""
 MIN_SKY_PIXELS = 256
 """Fewer sky pixels than this (inside the frame, above the horizon) read no sun."""
@@ -170,6 +171,7 @@ class SkyBlocks:
             log of the clip level where the channel is a bound).
         clipped: ``(B, 3)`` bool: most of the block's sky pixels are clipped in that channel (a lower bound).
         weight: ``(B,)`` the block's share of the sky pixels (sums to 1).
+        solid_angle: the sky's solid angle (sr), the pixels' own.
         sky_pixels: the number of sky pixels read.
     """
 
@@ -178,14 +180,15 @@ class SkyBlocks:
     clipped: np.ndarray
     weight: np.ndarray
     sky_pixels: int
+    solid_angle: float
 
 
 def sky_blocks(linear: np.ndarray, clipped: np.ndarray, sky: np.ndarray, rays: np.ndarray,
-               clip_value: float) -> SkyBlocks:
+               clip_value: float, pixel_sr: np.ndarray) -> SkyBlocks:
     """The sky pixels ``sky (H, W)`` of a linear image ``linear (H, W, 3)`` with clipped channels
     ``clipped (H, W, 3)`` and world rays ``rays (H, W, 3)``, in square blocks (at most
     :data:`MAX_BLOCKS_PER_SIDE` along the longer side); a block is kept when a quarter of it is sky.
-    ``clip_value`` is the linear value of a clipped channel (its bound)."""
+    ``clip_value`` is the linear value of a clipped channel (its bound); ``pixel_sr (H, W)`` each pixel's solid angle."""
     h, w = sky.shape
     bs = max(1, math.ceil(max(h, w) / MAX_BLOCKS_PER_SIDE))
     nbw = math.ceil(w / bs)
@@ -205,7 +208,8 @@ def sky_blocks(linear: np.ndarray, clipped: np.ndarray, sky: np.ndarray, rays: n
     d = dsum[keep]
     d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
     return SkyBlocks(directions=d, log_value=mean_log[keep], clipped=is_clipped[keep],
-                     weight=count[keep] / max(count[keep].sum(), 1.0), sky_pixels=int(sky.sum()))
+                     weight=count[keep] / max(count[keep].sum(), 1.0), sky_pixels=int(sky.sum()),
+                     solid_angle=float(pixel_sr[sky].sum()))
 
 
 @dataclass(frozen=True)
@@ -414,7 +418,7 @@ def _irls(x: torch.Tensor, blocks: SkyBlocks) -> tuple[torch.Tensor, torch.Tenso
             if satisfied is not None:
                 omega.masked_fill_(satisfied, 0.0)
     cost = (u.log1p_() * wb).sum((-2, -1)) / 3.0
-    return -EFFECTIVE_SAMPLES * cost, a, g
+    return -EFFECTIVE_SAMPLES_PER_SR * blocks.solid_angle * cost, a, g
 
 
 def _no_sun(reason: str, yaw: float, sun_probability: float = 0.0, posterior: np.ndarray | None = None) -> SunPosterior:
@@ -506,7 +510,9 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
         lin = np.asarray(srgb_to_linear(img))
         clipped = img >= clip_level if clip_level is not None else np.zeros(img.shape, bool)
         clip_value = float(srgb_to_linear(np.array(clip_level))) if clip_level is not None else 0.0
-    blocks = sky_blocks(lin, clipped, sky, rays, clip_value)
+    # a pinhole pixel's solid angle: cos^3 of its angle off the axis over fx fy
+    pixel_sr = np.clip(rays @ fwd, 0, 1) ** 3 / abs(float(Kc[0, 0] * Kc[1, 1]))
+    blocks = sky_blocks(lin, clipped, sky, rays, clip_value, pixel_sr)
     if len(blocks.weight) < 4:
         return _no_sun(f"the sky covers too few blocks to read ({len(blocks.weight)} < 4)", yaw)
 
