@@ -54,7 +54,7 @@ from physrelight.panorama import camera_rays, level_camera, view_intrinsics
 from physrelight.sky_model import overcast_sky, sun_colour
 
 __all__ = ["AZIMUTH_STEP_DEG", "CLIP_LEVEL", "DARK_SKY_LEVEL", "EFFECTIVE_SAMPLES_PER_SR", "ELEVATIONS_DEG", "LOG_SIGMA",
-           "MAX_BLOCKS_PER_SIDE", "MAX_EXPONENT", "MIN_EXPONENT", "MIN_SKY_PIXELS", "MIXES",
+           "MAX_BLOCKS_PER_SIDE", "MAX_EXPONENT", "MIN_EXPONENT", "MIN_SKY_PIXELS", "MIXES", "SkyBlocks",
            "SUNSKY_TURBIDITY_TABLE", "SunPosterior", "estimate_sun_from_sky", "hosek_wilkie_sky", "sky_blocks"]
 
 SUNSKY_TURBIDITY_TABLE = Path(__file__).resolve().parent / "data" / "sunsky_turbidity_table.safetensors"
@@ -450,7 +450,7 @@ def _with_spread(p: SunPosterior) -> SunPosterior:
 
 def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None, world_to_camera: Array | None = None,
                           *, pitch_deg: float | None = None, fov_deg: float | None = None, linear: bool = False,
-                          clip_level: float | None = CLIP_LEVEL) -> SunPosterior:
+                          clip_level: float | None = None) -> SunPosterior:
     """The sun's position read from the sky pixels of a photo, as a posterior (see the module doc).
 
     Args:
@@ -461,8 +461,8 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
             (rotation used); or neither, and ``pitch_deg`` (up positive) with ``fov_deg`` (horizontal), the
             camera ``relight`` assumes (heading world -Z, level).
         linear: the image is linear radiance rather than display values.
-        clip_level: display values at or above it are clipped (bounds); None: nothing is clipped (the default
-            for linear input is None whatever is given unless given explicitly in linear units).
+        clip_level: values at or above it (in the image's own units) are clipped: read as bounds. None (the
+            default): :data:`CLIP_LEVEL` for a display image, nothing clipped for a linear one.
 
     Returns:
         :class:`SunPosterior`. ``has_sun`` is False, with a reason, when fewer than :data:`MIN_SKY_PIXELS` sky
@@ -495,6 +495,8 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     sky = mask & (rays[..., 1] > -0.05)  # a little below the horizon is kept (a pitch a little off)
     if int(sky.sum()) < MIN_SKY_PIXELS:
         return _no_sun(f"too few sky pixels: {int(sky.sum())} < {MIN_SKY_PIXELS}", yaw)
+    if clip_level is None and not linear:
+        clip_level = CLIP_LEVEL
     if linear:
         lin = img
         clipped = img >= clip_level if clip_level is not None else np.zeros(img.shape, bool)
