@@ -83,7 +83,7 @@ DARK_SKY_LEVEL = 0.03
 MAX_BLOCKS_PER_SIDE = 16
 """The sky is read in blocks of pixels, at most this many along the image's longer side."""
 _REFINE_HALF_DEG, _REFINE_STEP_DEG = 6.0, 1.0
-_FLOOR = 1e-4  # linear values are floored here (relative to the sky's brightest block) before the log
+_FLOOR = 1e-3  # linear values are floored here (relative to the sky's median) before the log
 _IRLS_STEPS = 2
 
 
@@ -167,7 +167,7 @@ class SkyBlocks:
 
     Attributes:
         directions: ``(B, 3)`` unit world directions (the mean of the block's sky rays).
-        log_value: ``(B, 3)`` mean log linear value of the block's unclipped sky pixels per channel (or the
+        log_value: ``(B, 3)`` median log linear value of the block's unclipped sky pixels per channel (or the
             log of the clip level where the channel is a bound).
         clipped: ``(B, 3)`` bool: most of the block's sky pixels are clipped in that channel (a lower bound).
         weight: ``(B,)`` the block's share of the sky pixels (sums to 1).
@@ -181,6 +181,17 @@ class SkyBlocks:
     weight: np.ndarray
     sky_pixels: int
     solid_angle: float
+
+
+def _block_median(idx: np.ndarray, v: np.ndarray, nb: int) -> np.ndarray:
+    """``(nb,)`` the median of the values ``v (N,)`` in each block ``idx (N,)`` (0 where a block has none)."""
+    order = np.lexsort((v, idx))
+    vs = v[order]
+    n = np.bincount(idx, minlength=nb)
+    start = np.cumsum(n) - n
+    lo = np.clip(start + (n - 1) // 2, 0, max(len(vs) - 1, 0))
+    hi = np.clip(start + n // 2, 0, max(len(vs) - 1, 0))
+    return np.where(n > 0, 0.5 * (vs[lo] + vs[hi]) if len(vs) else 0.0, 0.0)
 
 
 def sky_blocks(linear: np.ndarray, clipped: np.ndarray, sky: np.ndarray, rays: np.ndarray,
@@ -199,12 +210,14 @@ def sky_blocks(linear: np.ndarray, clipped: np.ndarray, sky: np.ndarray, rays: n
     keep = count >= 0.25 * size
     dsum = np.stack([np.bincount(idx, rays[sky][:, k], nb) for k in range(3)], -1)
     lin, clp = linear[sky], clipped[sky]
-    top = max(float(np.max(np.where(clp, 0.0, lin), initial=0.0)), clip_value if clp.any() else 0.0, 1e-30)
-    logv = np.log(np.maximum(lin, _FLOOR * top))
+    # black pixels are floored at a thousandth of the sky's median (not its brightest: the sun's disc is 1e4 times it)
+    typical = max(float(np.median(lin)), clip_value if clp.all() else 0.0, 1e-30)
+    logv = np.log(np.maximum(lin, _FLOOR * typical))
     unclipped = np.stack([np.bincount(idx, ~clp[:, k], nb) for k in range(3)], -1)
-    logsum = np.stack([np.bincount(idx, np.where(clp[:, k], 0.0, logv[:, k]), nb) for k in range(3)], -1)
     is_clipped = unclipped < 0.5 * count[:, None]
-    mean_log = np.where(is_clipped, math.log(max(clip_value, 1e-30)), logsum / np.maximum(unclipped, 1))
+    # the median, not the mean: the sun's disc or a cloud's edge inside a block does not move it
+    med = np.stack([_block_median(idx[~clp[:, k]], logv[~clp[:, k], k], nb) for k in range(3)], -1)
+    mean_log = np.where(is_clipped, math.log(max(clip_value, 1e-30)), med)
     d = dsum[keep]
     d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
     return SkyBlocks(directions=d, log_value=mean_log[keep], clipped=is_clipped[keep],
