@@ -54,7 +54,7 @@ from physrelight.panorama import camera_rays, level_camera, view_intrinsics
 from physrelight.sky_model import overcast_sky, sun_colour
 
 __all__ = ["AZIMUTH_STEP_DEG", "CLIP_LEVEL", "DARK_SKY_LEVEL", "EFFECTIVE_SAMPLES_PER_SR", "ELEVATIONS_DEG", "LOG_SIGMA",
-           "MAX_BLOCKS_PER_SIDE", "MAX_EXPONENT", "MIN_EXPONENT", "MIN_SKY_PIXELS", "MIXES", "SkyBlocks",
+           "MAX_BLOCKS_PER_SIDE", "MAX_CLIPPED_SKY", "MAX_EXPONENT", "MIN_EXPONENT", "MIN_SKY_PIXELS", "MIXES", "SkyBlocks",
            "SUNSKY_TURBIDITY_TABLE", "SunPosterior", "estimate_sun_from_sky", "hosek_wilkie_sky", "sky_blocks"]
 
 SUNSKY_TURBIDITY_TABLE = Path(__file__).resolve().parent / "data" / "sunsky_turbidity_table.safetensors"
@@ -78,6 +78,8 @@ MIN_SKY_PIXELS = 256
 """Fewer sky pixels than this (inside the frame, above the horizon) read no sun."""
 CLIP_LEVEL = 0.98
 """A display value at or above this is clipped: the pixel is at least this bright (a one-sided bound)."""
+MAX_CLIPPED_SKY = 0.8
+"""A sky more than this share of which is clipped in every channel reads no sun (blown out)."""
 DARK_SKY_LEVEL = 0.03
 """A display photo whose sky's median luminance (display value) is below this reads no sun (night)."""
 MAX_BLOCKS_PER_SIDE = 16
@@ -480,7 +482,8 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     Returns:
         :class:`SunPosterior`. ``has_sun`` is False, with a reason, when fewer than :data:`MIN_SKY_PIXELS` sky
         pixels lie above the horizon, when a display photo's sky is darker than :data:`DARK_SKY_LEVEL` (night),
-        or when the sunless sky explains the pixels best; then the posterior is flat or nearly so.
+        when more than :data:`MAX_CLIPPED_SKY` of it is clipped in every channel, or when the sunless sky
+        explains the pixels best; then the posterior is flat or nearly so.
 
     Raises:
         ValueError: shapes, non-finite or negative values, a mask that is not boolean, a bad camera.
@@ -530,6 +533,10 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     blocks = sky_blocks(lin, clipped, sky, rays, clip_value, pixel_sr)
     if len(blocks.weight) < 4:
         return _no_sun(f"the sky covers too few blocks to read ({len(blocks.weight)} < 4)", yaw)
+    blown = float(blocks.weight[blocks.clipped.all(-1)].sum())
+    if blown > MAX_CLIPPED_SKY:
+        # bounds alone do not shape a sky: every bright enough model satisfies them
+        return _no_sun(f"the sky is blown out ({blown:.0%} of it clipped in every channel > {MAX_CLIPPED_SKY:.0%})", yaw)
 
     el = np.array(ELEVATIONS_DEG)
     az = np.arange(0.0, 360.0, AZIMUTH_STEP_DEG)
@@ -560,7 +567,7 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     fa = az[i_a] + np.arange(-_REFINE_HALF_DEG, _REFINE_HALF_DEG + 1e-9, _REFINE_STEP_DEG)
     fe = np.unique(fe)
     with torch.no_grad():
-        fll, fa_, fg, _ = _fit(blocks, _table_at_elevations(fe), fe, fa)
+        fll, fit_a, fg, _ = _fit(blocks, _table_at_elevations(fe), fe, fa)
     fjoint = fll.double().numpy() + np.log(np.cos(np.radians(fe)))[None, None, :, None]
     j_t, j_m, j_e, j_a = np.unravel_index(int(np.argmax(fjoint)), fjoint.shape)
     e_map, a_map = float(fe[j_e]), float(fa[j_a]) % 360.0
@@ -570,6 +577,6 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
                        elevation_deg=e_map, azimuth_deg=(a_map - yaw + 180.0) % 360.0 - 180.0,
                        world_azimuth_deg=a_map, azimuth_std_deg=0.0, elevation_std_deg=0.0, credible_area_sr=0.0,
                        turbidity=float(turbidities[j_t]), mix=float(mixes[j_m]),
-                       level=np.exp(fa_[j_t, j_m, j_e, j_a].double().numpy()), exponent=float(fg[j_t, j_m, j_e, j_a]),
+                       level=np.exp(fit_a[j_t, j_m, j_e, j_a].double().numpy()), exponent=float(fg[j_t, j_m, j_e, j_a]),
                        camera_yaw_deg=yaw, _cell_sr=cell)
     return _with_spread(out)

@@ -203,7 +203,17 @@ def test_09_a_night_sky_reads_no_sun() -> None:
     assert not p.has_sun and "too dark" in p.reason and p.sun_direction is None
 
 
-def test_10_bad_shapes_and_values_are_refused() -> None:
+def test_10_a_blown_out_sky_reads_no_sun() -> None:
+    """A sky clipped to white in every channel (bounds only, no shape to fit): no sun, the flat prior."""
+    K, R, rays = _camera(30.0, 15.0)
+    mask = rays[..., 1] > 0
+    p = sfs.estimate_sun_from_sky(np.ones((H, W, 3)), mask, K, R)
+    assert not p.has_sun and "blown out" in p.reason and p.sun_direction is None
+    m = p.azimuth_marginal()
+    assert m.max() / m.min() == pytest.approx(1.0, abs=1e-9)
+
+
+def test_11_bad_shapes_and_values_are_refused() -> None:
     K, R, _ = _camera(0.0, 10.0)
     img, mask = np.full((H, W, 3), 0.5), np.ones((H, W), bool)
     with pytest.raises(ValueError, match="image must have shape"):
@@ -226,7 +236,7 @@ def test_10_bad_shapes_and_values_are_refused() -> None:
         sfs.estimate_sun_from_sky(img, mask, K, R, pitch_deg=10.0, fov_deg=60.0)
 
 
-def test_11_pitch_and_fov_are_relights_camera() -> None:
+def test_12_pitch_and_fov_are_relights_camera() -> None:
     """``pitch_deg``/``fov_deg`` give the same answer as the camera they stand for (level, heading world -Z)."""
     K, R, rays = _camera(0.0, 12.0)
     img = sunsky_radiance(rays, envmap.direction_from_angles(30.0, 15.0))
@@ -237,7 +247,7 @@ def test_11_pitch_and_fov_are_relights_camera() -> None:
     assert a.posterior.tobytes() == sfs.estimate_sun_from_sky(img, mask, K, R, linear=True).posterior.tobytes()
 
 
-def test_12_the_maps_sky_reproduces_the_photo_and_its_sh_is_sky_plus_sun() -> None:
+def test_13_the_maps_sky_reproduces_the_photo_and_its_sh_is_sky_plus_sun() -> None:
     """On a linear Mitsuba sky the MAP sky (:meth:`radiance`) matches the sky pixels within 5 % (median relative
     error, the sun's disc aside), and :meth:`sh` is the projection of a fine map of that sky plus the sun's delta."""
     e, a, t, yaw, pitch = 30.0, 20.0, 4.0, 10.0, 15.0
@@ -255,7 +265,7 @@ def test_12_the_maps_sky_reproduces_the_photo_and_its_sh_is_sky_plus_sun() -> No
     assert np.abs(p.sh() - ref).max() < 0.02 * np.abs(ref).max()
 
 
-def test_13_the_turbidity_table_keeps_the_turbidity_3_table() -> None:
+def test_14_the_turbidity_table_keeps_the_turbidity_3_table() -> None:
     """The turbidity-2-6 table's turbidity-3 slice is the shipped turbidity-3 table (both written by
     ``synth.sunsky_table``), and :func:`hosek_wilkie_sky` at turbidity 3 is ``sunsky_radiance``."""
     from safetensors.numpy import load_file
