@@ -20,6 +20,12 @@ data's ranges (:data:`synth.lighting.TURBIDITY_RANGE` 2-6, :data:`synth.lighting
 Regenerate (deterministic, ~10 s)::
 
     .venv/bin/python -m synth.sunsky_table -o physrelight/data/sunsky_table.safetensors
+
+The same sky at each turbidity of :data:`TURBIDITIES` (the synthetic data's range, for
+:mod:`physrelight.sun_from_sky`, which fits the turbidity of a photo's sky) is a second file, each turbidity
+normalised by its own sun and zenith sun as above; the turbidity-3 file is left as it is (~50 s, 1.3 MB)::
+
+    .venv/bin/python -m synth.sunsky_table --turbidities -o physrelight/data/sunsky_turbidity_table.safetensors
 """
 
 from __future__ import annotations
@@ -33,8 +39,8 @@ import numpy as np
 from physrelight import colour
 from physrelight.io import atomic_path, canonical_safetensors
 
-__all__ = ["AZIMUTH_COLS", "ELEVATIONS_DEG", "GROUND_ALBEDO", "TURBIDITY", "VIEW_ROWS", "main", "table_directions",
-           "sunsky_table", "zenith_sun_colour"]
+__all__ = ["AZIMUTH_COLS", "ELEVATIONS_DEG", "GROUND_ALBEDO", "TURBIDITIES", "TURBIDITY", "VIEW_ROWS", "main",
+           "table_directions", "sunsky_table", "zenith_sun_colour"]
 
 ELEVATIONS_DEG = (2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 15.0, 18.0, 22.0, 26.0, 30.0, 35.0, 40.0, 45.0,
                   50.0, 60.0, 70.0, 80.0, 90.0)
@@ -48,6 +54,8 @@ AZIMUTH_COLS = 61
 """Azimuths from the sun ``linspace(0, 180, AZIMUTH_COLS)`` (3 degrees apart)."""
 TURBIDITY = 3.0
 GROUND_ALBEDO = 0.2
+TURBIDITIES = (2.0, 3.0, 4.0, 5.0, 6.0)
+"""Turbidities of the ``--turbidities`` table: :data:`synth.lighting.TURBIDITY_RANGE` (2-6) a unit apart."""
 
 
 def table_directions(elevation_deg: float) -> tuple[np.ndarray, np.ndarray]:
@@ -99,9 +107,25 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m synth.sunsky_table``: write the clear-sky table (see the module's docstring)."""
     p = argparse.ArgumentParser(prog="python -m synth.sunsky_table", description=__doc__.split("\n\n")[0])
     p.add_argument("-o", "--out", required=True, help="the .safetensors file to write (atomically)")
+    p.add_argument("--turbidities", action="store_true",
+                   help=f"write the table at every turbidity of {TURBIDITIES} (a leading axis) instead of {TURBIDITY:g} alone")
     args = p.parse_args(argv)
-    table = sunsky_table()
     from safetensors.numpy import save
+
+    if args.turbidities:
+        stack = np.stack([sunsky_table(turbidity=t) for t in TURBIDITIES])
+        tensors = {"radiance": stack.astype(np.float16), "turbidities": np.array(TURBIDITIES),
+                   "elevations_deg": np.array(ELEVATIONS_DEG), "view_elevations_deg": np.linspace(0.0, 90.0, VIEW_ROWS),
+                   "azimuths_deg": np.linspace(0.0, 180.0, AZIMUTH_COLS)}
+        meta = {"model": "Mitsuba 3 sunsky (Hosek-Wilkie), sky only, per turbidity over its sun's irradiance luminance "
+                         "and its zenith sun's colour", "ground_albedo": repr(GROUND_ALBEDO),
+                "written_by": "synth.sunsky_table --turbidities"}
+        with atomic_path(args.out) as tmp:
+            tmp.write_bytes(canonical_safetensors(save(tensors, metadata=meta)))
+        print(f"wrote {args.out}: {len(TURBIDITIES)} turbidities x {stack.shape[1]} sun elevations x {VIEW_ROWS} view "
+              f"elevations x {AZIMUTH_COLS} azimuths", file=sys.stderr)
+        return 0
+    table = sunsky_table()
 
     tensors = {"radiance": table.astype(np.float16), "elevations_deg": np.array(ELEVATIONS_DEG),
                "view_elevations_deg": np.linspace(0.0, 90.0, VIEW_ROWS),
