@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -36,9 +37,10 @@ import torch.distributed as dist
 
 from physrelight import image_model, io
 from physrelight.lighting_prior import LightingPrior
+from synth.dataset import SynthDataset
 
 from . import checkpoint as ckpt
-from .data import PairSampler, check_under_ev
+from .data import PairSampler, check_under_ev, data_notes, open_training_data
 from .evaluate import evaluate
 from .lighting import load_prior
 
@@ -85,6 +87,8 @@ class TrainConfig(RunConfig):
     mvs_pooled: bool = False  # MVS normals at the dataset's resolution, pooled (learned.data.pooled_mvs_normals)
     degrade: bool = False  # the network sees photos with camera nuisances put back (learned.data.degrade_photo)
     degrade_under_ev: float = 0.0  # and, half the time, up to this many stops under-exposed, metered back
+    scenes: str | None = None  # "a,b": only these scenes of data (its split ignored); learned.data.open_training_data
+    sky: str = "auto"  # a photo collection's photos without a mask: the shipped segmenter's sky ("auto") or none
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
 
@@ -204,13 +208,21 @@ def train(config: TrainConfig) -> dict[str, Any]:
 
 def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
     run = Path(config.out)
+    # The data (synth set or photo collection) is opened and every file checked before the run folder exists.
+    data = open_training_data(config.data, config.train_split, config.scenes, config.sky)
     if rank == 0:
         (run / "panels").mkdir(parents=True, exist_ok=True)
+        for line in data_notes(data):
+            print(line, file=sys.stderr)
     _barrier()
     prior = load_prior(config.prior)
     sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed,
                           mirror=config.mirror, mvs_pooled=config.mvs_pooled, stencil=config.mvs_stencil,
-                          degrade=config.degrade, degrade_under_ev=config.degrade_under_ev)
+                          degrade=config.degrade, degrade_under_ev=config.degrade_under_ev, data=data)
+    # Validation reads ground truth: a photo collection has none, so without --val-data it is skipped.
+    can_validate = config.val_data is not None or isinstance(data, SynthDataset)
+    if rank == 0 and not can_validate:
+        print(f"data: {config.data} has no ground truth and no --val-data was given: no validation", file=sys.stderr)
     weights = LossWeights(**config.weights)
 
     torch.manual_seed(config.seed)
@@ -274,7 +286,7 @@ def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
                 ckpt.save_checkpoint(run, done, model, opt, {"config": asdict(config), "train_seconds": seconds,
                                                              "world_size": world})
             _barrier()
-        if done % config.val_every == 0 or done == config.steps:
+        if can_validate and (done % config.val_every == 0 or done == config.steps):
             if rank == 0:
                 metrics = validate(model if config.stage == "inverse" else teacher, prior, config,
                                    shadow_net=model if config.stage == "shadow" else None,
