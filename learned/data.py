@@ -14,7 +14,7 @@ The data may also be a real photo collection (a COLMAP workspace or MegaDepth, r
 :mod:`physrelight.collections`; :func:`open_training_data` finds the layout): it serves the same
 five keys, its photos are centre-cropped to a square (:func:`crop_square`, the principal point moved
 with it) before the resize, and photos without a sky mask get the shipped sky segmenter's
-(:func:`segmenter_sky_fn`, kept in memory).
+(:func:`learned.collection_sky.segmenter_sky_fn`, passed in by training; kept in memory).
 
 Batches are a pure function of ``(seed, step, rank)`` (:meth:`PairSampler.batch`), so a
 resumed or distributed run sees exactly the batches an uninterrupted one would.
@@ -48,13 +48,13 @@ import torch
 import torch.nn.functional as F
 
 from physrelight import camera, colour
-from physrelight.collections import Collection, find_layout, open_collection
+from physrelight.collections import Collection, SkyFn, find_layout, open_collection
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import PhotoParams, make_photo, sample_photo_params
 
 __all__ = ["Batch", "PairSampler", "TrainingData", "check_under_ev", "crop_square", "data_notes", "degrade_photo",
            "evenly_spread", "list_scenes", "load_photo", "mirror_view", "open_training_data", "pooled_mvs_normals",
-           "resize_short_side", "resize_view", "segmenter_sky_fn"]
+           "resize_short_side", "resize_view"]
 
 TrainingData = SynthDataset | Collection
 
@@ -292,29 +292,6 @@ def crop_square(image: torch.Tensor, depth: torch.Tensor, sky: torch.Tensor, K: 
             sky[..., y0:y0 + n, x0:x0 + n], k)
 
 
-def segmenter_sky_fn(weights: str | Path | None = None):
-    """``photo (H, W, 3) display values -> sky (H, W) bool`` by the shipped sky segmenter, as ``physrelight
-    relight`` makes its mask (:meth:`learned.relighter.Relighter.photo_sky`: the plausible sky at full
-    resolution, grown by sky colour); None when no segmenter weights are shipped."""
-    from physrelight import colour as _colour
-
-    from .lighting import WEIGHTS_DIR
-    from .sky_segmentation import GROW_REACH, load_sky_segmenter, sky_mask_full_resolution
-
-    path = Path(weights) if weights is not None else WEIGHTS_DIR / "sky_segmentation.safetensors"
-    if not path.is_file():
-        return None
-    model = load_sky_segmenter(path)
-
-    def sky_fn(photo: np.ndarray) -> np.ndarray:
-        lin = to_chw(_colour.from_ldr(np.clip(photo, 0.0, 1.0)))[None]
-        with torch.no_grad():
-            sky, _ = sky_mask_full_resolution(model, lin, grow=GROW_REACH)
-        return sky[0, 0].numpy()
-
-    return sky_fn
-
-
 def _scene_list(scenes: str | Sequence[str] | None) -> list[str] | None:
     if scenes is None:
         return None
@@ -325,7 +302,7 @@ def _scene_list(scenes: str | Sequence[str] | None) -> list[str] | None:
 
 
 def open_training_data(root: str | Path, split: str = "train", scenes: str | Sequence[str] | None = None,
-                       sky: str = "auto") -> TrainingData:
+                       sky_fn: SkyFn | None = None) -> TrainingData:
     """The self-supervised data in ``root``, whatever its layout (:func:`physrelight.collections.find_layout`):
     a synth set (:class:`synth.dataset.SynthDataset`, ``mode="self_supervised"``) or a photo collection
     (:class:`physrelight.collections.Collection`). Every file is checked here, before any run folder is made.
@@ -334,11 +311,10 @@ def open_training_data(root: str | Path, split: str = "train", scenes: str | Seq
         split: the scenes' split (by the hash of their names, the same rule for both); ignored when
             ``scenes`` names them.
         scenes: ``"a,b"`` or a list: only these scenes (an unknown name is a ``ValueError`` listing the known).
-        sky: for a collection's photos without a mask file: ``"auto"`` (the shipped segmenter,
-            :func:`segmenter_sky_fn`) or ``"none"`` (no sky).
+        sky_fn: for a collection's photos without a mask file, ``photo (H, W, 3) -> sky (H, W) bool``
+            (training passes the shipped segmenter's, :func:`learned.collection_sky.segmenter_sky_fn`);
+            None: no sky.
     """
-    if sky not in ("auto", "none"):
-        raise ValueError(f"sky must be 'auto' or 'none', got {sky!r}")
     names = _scene_list(scenes)
     if find_layout(root) == "synth":
         ds = SynthDataset(root, split="all" if names else split, mode="self_supervised")
@@ -349,7 +325,7 @@ def open_training_data(root: str | Path, split: str = "train", scenes: str | Seq
             ds.scenes = sorted(set(names))
             ds.items = [it for it in ds.items if it.scene in ds.scenes]
         return ds
-    return open_collection(root, split, names, segmenter_sky_fn() if sky == "auto" else None)
+    return open_collection(root, split, names, sky_fn)
 
 
 def list_scenes(root: str | Path) -> list[str]:

@@ -36,10 +36,12 @@ import torch
 import torch.distributed as dist
 
 from physrelight import image_model, io
+from physrelight.collections import find_layout
 from physrelight.lighting_prior import LightingPrior
 from synth.dataset import SynthDataset
 
 from . import checkpoint as ckpt
+from .collection_sky import segmenter_sky_fn
 from .data import PairSampler, check_under_ev, data_notes, open_training_data
 from .evaluate import evaluate
 from .lighting import load_prior
@@ -110,6 +112,8 @@ class TrainConfig(RunConfig):
             raise ValueError(f"mvs_stencil must be one of {MVS_STENCILS}, got {self.mvs_stencil!r}")
         if self.init is not None and not Path(self.init).exists():
             raise ValueError(f"init {self.init!r} does not exist (a {self.stage} run folder or weights file)")
+        if self.sky not in ("auto", "none"):
+            raise ValueError(f"sky must be 'auto' or 'none', got {self.sky!r}")
         if not isinstance(self.mirror, bool):
             raise ValueError(f"mirror must be True or False, got {self.mirror!r}")
         if not isinstance(self.mvs_pooled, bool):
@@ -209,7 +213,9 @@ def train(config: TrainConfig) -> dict[str, Any]:
 def _train(config: TrainConfig, rank: int, world: int) -> dict[str, Any]:
     run = Path(config.out)
     # The data (synth set or photo collection) is opened and every file checked before the run folder exists.
-    data = open_training_data(config.data, config.train_split, config.scenes, config.sky)
+    collection = find_layout(config.data) != "synth"  # its photos' sky: masks/, else the shipped segmenter's
+    data = open_training_data(config.data, config.train_split, config.scenes,
+                              segmenter_sky_fn() if collection and config.sky == "auto" else None)
     if rank == 0:
         (run / "panels").mkdir(parents=True, exist_ok=True)
         for line in data_notes(data):

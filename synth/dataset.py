@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from physrelight import io
-from physrelight.collections import split_of  # the rule photo collections split by too
+from physrelight.collections.common import split_of  # the rule photo collections split by too
 
 from .writer import FORMAT, VERSION
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from physrelight import colmap_format as cf
 
-from . import PhotoRecord, SceneRecord, check_scenes
+from .common import PhotoRecord, SceneRecord, check_scenes
 
 __all__ = ["DEPTH_SUFFIXES", "depth_path", "is_workspace", "parse_collection", "parse_workspace", "sparse_folder",
            "workspaces"]

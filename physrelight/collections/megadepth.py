@@ -27,7 +27,7 @@ import numpy as np
 
 from physrelight import colmap_format as cf
 
-from . import PhotoRecord, SceneRecord, check_scenes
+from .common import PhotoRecord, SceneRecord, check_scenes
 
 __all__ = ["DEPTH_DATASET", "is_megadepth", "parse_collection", "parse_scene", "read_depth_h5", "scene_folders",
            "write_depth_h5"]

@@ -45,7 +45,7 @@ def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
 def test_01_an_export_reads_back_as_the_native_set(tiny_dataset: Path, exported: dict[str, Path], fmt: str) -> None:
     """Photos bit-equal (the same file bytes too), depth equal, sky equal, cameras within 1e-6, same keys."""
     native = SynthDataset(tiny_dataset, split="all", mode="self_supervised")
-    coll = open_training_data(exported[fmt], "all", sky="none")
+    coll = open_training_data(exported[fmt], "all")
     assert isinstance(coll, Collection) and find_layout(exported[fmt]) == fmt
     assert coll.scenes == native.scenes and coll.mvs_scale == 1
     for s in native.scenes:
@@ -70,7 +70,7 @@ def test_02_cross_projection_warps_agree_within_1e_4_px(tiny_dataset: Path, expo
     """Every pixel of view a, back-projected with its MVS depth and projected into view b, lands on the
     same spot (1e-4 px) with the export's cameras as with the native ones."""
     native = SynthDataset(tiny_dataset, split="all", mode="self_supervised")
-    coll = open_training_data(exported[fmt], "all", sky="none")
+    coll = open_training_data(exported[fmt], "all")
 
     def landing(ds, s: str, a: int, b: int) -> tuple[torch.Tensor, torch.Tensor]:
         ia, ib = ds.load(s, a, 0, KEYS), ds.load(s, b, 0, KEYS)
@@ -162,7 +162,7 @@ def test_06_a_workspace_is_found_in_its_usual_variants(exported: dict[str, Path]
         p.rename(p.with_name(p.name.replace(".geometric.", ".photometric.")))
     (ws / "stereo" / "depth_maps" / "v01_l01.png.photometric.bin").unlink()
     shutil.copyfile(ws / "images" / "v00_l00.png", ws / "images" / "extra.png")
-    coll = open_training_data(ws, scenes="my_scene", sky="none")
+    coll = open_training_data(ws, scenes="my_scene")
     assert coll.photo_keys("my_scene") == [(0, 0), (0, 1), (1, 0)]
     assert coll.skipped() == {"my_scene": {"no pose": 1, "no depth": 1}}
     notes = data_notes(coll)
@@ -170,18 +170,18 @@ def test_06_a_workspace_is_found_in_its_usual_variants(exported: dict[str, Path]
 
 
 def test_07_photos_without_masks_get_the_shipped_segmenters_sky(exported: dict[str, Path], tmp_path: Path) -> None:
-    from learned.data import segmenter_sky_fn
+    from learned.collection_sky import segmenter_sky_fn
     from physrelight import io
 
     ws = _copy(exported["colmap"] / "scene_0000", tmp_path / "s")
     shutil.rmtree(ws / "masks")
-    coll = open_training_data(ws, "all")
+    coll = open_training_data(ws, "all", sky_fn=segmenter_sky_fn())
     assert coll.sky_sources() == {"s": "segmenter"} and "shipped sky segmenter" in data_notes(coll)[1]
     sky = coll.load("s", 0, 1, ("sky_mask",))["sky_mask"]
     expect = segmenter_sky_fn()(io.read_image(ws / "images" / "v00_l01.png"))
     np.testing.assert_array_equal(sky, expect)
     assert coll.load("s", 0, 1, ("sky_mask",))["sky_mask"] is sky  # kept in memory, computed once
-    assert not open_training_data(ws, "all", sky="none").load("s", 0, 0, ("sky_mask",))["sky_mask"].any()
+    assert not open_training_data(ws, "all").load("s", 0, 0, ("sky_mask",))["sky_mask"].any()
     with pytest.raises(PermissionError, match="albedo"):
         coll.load("s", 0, 0, ("albedo",))
 
@@ -273,7 +273,7 @@ def test_11_megadepth_depth_files_and_the_sfm_model_fallback(exported: dict[str,
     sfm = md / "MegaDepth_v1_SfM" / "scene_0002" / "sparse" / "manhattan" / "0"
     sfm.parent.mkdir(parents=True)
     shutil.move(dense / "sparse", sfm)
-    assert open_training_data(md, scenes="scene_0002", sky="none").num_views("scene_0002") == 2
+    assert open_training_data(md, scenes="scene_0002").num_views("scene_0002") == 2
     m = cf.read_model(sfm)
     m.cameras[1] = cf.Camera(1, "SIMPLE_RADIAL", 24, 24, np.array([20.0, 12.0, 12.0, 0.02]))
     cf.write_model(m, sfm)

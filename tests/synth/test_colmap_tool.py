@@ -26,6 +26,11 @@ pytestmark = [pytest.mark.slow, pytest.mark.colmap]
 
 VIEWS = 24
 RES = 256
+YAW = 60.0  # views within +-YAW degrees of the landmark's front
+ELEVATED = 0.25  # share of views from above eye level (a height baseline as well as a horizontal one)
+FOV = 55.0  # one calibrated lens: COLMAP is given its intrinsics and estimates the poses
+SPP = 32
+SCENE_SEED = 1576890651  # a domed rotunda with textured columns and walls (a bare column gives SIFT too little)
 
 
 def umeyama(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -57,9 +62,10 @@ def _colmap(*args: str, cwd: Path) -> None:
     assert out.returncode == 0, f"colmap {args[0]} failed:\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}"
 
 
-def render_capture(root: Path, views: int = VIEWS, res: int = RES, seed: int = 3) -> list[np.ndarray]:
+def render_capture(root: Path, views: int = VIEWS, res: int = RES, seed: int = SCENE_SEED
+                   ) -> tuple[list[np.ndarray], np.ndarray]:
     """A walk-around capture of one textured synth landmark as a COLMAP workspace's ``images/`` and
-    ``masks/`` (black = sky); returns each view's ``world_to_camera``.
+    ``masks/`` (black = sky); returns each view's ``world_to_camera`` and the lens's ``K (3, 3)``.
 
     The views come from the library's tourist sampler with a capture's spread (yaw within +-25 deg of
     the front, 2-3 landmark radii away, one lens range; the dataset default spreads photos round the
@@ -69,21 +75,21 @@ def render_capture(root: Path, views: int = VIEWS, res: int = RES, seed: int = 3
     from synth import cameras, lighting, render, scene
 
     spec = scene.generate_scene(seed)
-    cams = cameras.sample_views(spec, views, seed=seed, width=res, height=res, yaw_range_deg=25.0,
-                                distance_range=(2.0, 3.0), fov_range=(50.0, 60.0), elevated_fraction=0.0)
-    light = lighting.sunsky(seed, elevation_deg=40.0, resolution=32)
-    mscene = render.build_scene(spec, cams, light, spp=16, seed=seed)
+    cams = cameras.sample_views(spec, views, seed=7, width=res, height=res, yaw_range_deg=YAW,
+                                distance_range=(2.0, 3.0), fov_range=(FOV, FOV), elevated_fraction=ELEVATED)
+    light = lighting.sunsky(7, elevation_deg=40.0, resolution=32)
+    mscene = render.build_scene(spec, cams, light, spp=SPP, seed=7)
     (root / "images").mkdir(parents=True)
     (root / "masks").mkdir()
     poses = []
     for i, cam in enumerate(cams):
-        radiance = render.render_radiance(mscene, i, 16, seed + i)
-        sky = render.render_geometry(mscene, i, cam, 1, seed + i).sky_mask
+        radiance = render.render_radiance(mscene, i, SPP, 7 + i)
+        sky = render.render_geometry(mscene, i, cam, 1, 7 + i).sky_mask
         gain = 1.0 / max(np.percentile(radiance, 99), 1e-6)
         io.write_png(root / "images" / f"v{i:02d}.png", np.asarray(colour.linear_to_srgb(np.clip(radiance * gain, 0, 1))))
         io.write_png(root / "masks" / f"v{i:02d}.png.png", np.where(sky, 0.0, 1.0))
         poses.append(np.asarray(cam.world_to_camera, dtype=np.float64))
-    return poses
+    return poses, np.asarray(cams[0].K, dtype=np.float64)
 
 
 def test_colmap_reconstruction_is_read_in_the_rendered_frame(tmp_path: Path) -> None:
@@ -96,7 +102,7 @@ def test_colmap_reconstruction_is_read_in_the_rendered_frame(tmp_path: Path) -> 
 
     t0 = time.perf_counter()
     ws = tmp_path / "capture"
-    poses = render_capture(ws)
+    poses, K = render_capture(ws)
     t_render = time.perf_counter() - t0
     work = tmp_path / "sfm"
     (work / "sparse").mkdir(parents=True)
@@ -104,11 +110,14 @@ def test_colmap_reconstruction_is_read_in_the_rendered_frame(tmp_path: Path) -> 
     # The masks keep SIFT off the sky, as COLMAP's mask convention says (black = no features).
     _colmap("feature_extractor", "--database_path", db, "--image_path", str(ws / "images"),
             "--ImageReader.mask_path", str(ws / "masks"), "--ImageReader.camera_model", "PINHOLE",
+            "--ImageReader.single_camera", "1", "--ImageReader.camera_params",
+            ",".join(repr(float(x)) for x in (K[0, 0], K[1, 1], K[0, 2], K[1, 2])),
             "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads", "2", cwd=work)
     _colmap("exhaustive_matcher", "--database_path", db, "--SiftMatching.use_gpu", "0",
             "--SiftMatching.num_threads", "2", cwd=work)
     _colmap("mapper", "--database_path", db, "--image_path", str(ws / "images"),
-            "--output_path", str(work / "sparse"), "--Mapper.num_threads", "2", cwd=work)
+            "--output_path", str(work / "sparse"), "--Mapper.num_threads", "2", "--Mapper.ba_refine_focal_length", "0",
+            "--Mapper.ba_refine_extra_params", "0", cwd=work)
     t_colmap = time.perf_counter() - t0 - t_render
 
     # The reader reads COLMAP's own binary model, and its text export the same.
