@@ -329,7 +329,7 @@ def open_training_data(root: str | Path, split: str = "train", scenes: str | Seq
 
 
 def list_scenes(root: str | Path) -> list[str]:
-    """Every scene name in ``root``, whatever its split (for ``--list-scenes``)."""
+    """Every scene name in ``root``, whatever its split (``physrelight train scenes``)."""
     if find_layout(root) == "synth":
         return SynthDataset(root, split="all", mode="self_supervised").scenes
     return open_collection(root, "all", validate=False).all_scenes
