@@ -41,9 +41,9 @@ import numpy as np
 
 from physrelight.io import atomic_path
 
-__all__ = ["CAMERA_MODELS", "PINHOLE_MODELS", "Camera", "Image", "Point3D", "SparseModel", "colmap_from_world_to_camera",
-           "find_sparse_model", "pinhole_K", "qvec_to_rotmat", "read_dense_array", "read_model", "rotmat_to_qvec",
-           "world_to_camera_from_colmap", "write_dense_array", "write_model"]
+__all__ = ["CAMERA_MODELS", "PINHOLE_MODELS", "Camera", "Image", "Point3D", "SparseModel",
+           "colmap_from_world_to_camera", "find_sparse_model", "pinhole_K", "qvec_to_rotmat", "read_dense_array",
+           "read_model", "rotmat_to_qvec", "world_to_camera_from_colmap", "write_dense_array", "write_model"]
 
 # model id -> (name, number of parameters), COLMAP's src/colmap/sensor/models.h
 CAMERA_MODELS: dict[int, tuple[str, int]] = {
@@ -345,7 +345,8 @@ def _read_images_txt(path: Path) -> dict[int, Image]:
         pts_line = lines[i + 1] if i + 1 < len(lines) else ""
         i += 2
         try:
-            iid, q, t, cid, name = int(el[0]), [float(x) for x in el[1:5]], [float(x) for x in el[5:8]], int(el[8]), el[9]
+            iid, cid, name = int(el[0]), int(el[8]), el[9]
+            q, t = [float(x) for x in el[1:5]], [float(x) for x in el[5:8]]
             pts = pts_line.split()
             if len(pts) % 3:
                 raise ValueError

@@ -87,7 +87,8 @@ def check_scenes(root: str | Path, wanted: list[str] | None, found: list[str]) -
     """``ValueError`` naming the scenes of ``wanted`` that ``root`` does not have (and those it has)."""
     unknown = [s for s in wanted or [] if s not in found]
     if unknown:
-        raise ValueError(f"{root}: no scene {', '.join(map(repr, unknown))}; it has {', '.join(sorted(found)) or 'none'}")
+        raise ValueError(f"{root}: no scene {', '.join(map(repr, unknown))}; "
+                         f"it has {', '.join(sorted(found)) or 'none'}")
 
 
 def group_views(photos: list[PhotoRecord]) -> list[list[PhotoRecord]]:
