@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from physrelight.cli_common import positive_int
 
@@ -125,7 +126,7 @@ def _config(args: argparse.Namespace, stage: str):
                        mvs_stencil=getattr(args, "mvs_stencil", "central"), mirror=args.mirror,
                        mvs_pooled=getattr(args, "mvs_pooled", False), degrade=getattr(args, "degrade", False),
                        degrade_under_ev=getattr(args, "degrade_under_ev", 0.0),
-                       weights=weights, progress=not args.quiet, **compute)
+                       **_data_selection_config(args), weights=weights, progress=not args.quiet, **compute)
 
 
 def _train_inverse(args: argparse.Namespace) -> int:
@@ -229,6 +230,41 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--loss-weight", action="append", metavar="NAME=VALUE",
                    help="override a loss weight (appearance, albedo, normal, cross, prior, shadow, normal_smooth)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _data_selection(p: argparse.ArgumentParser) -> None:
+    """``--scenes`` and ``--sky``: which scenes of ``--data`` (a synth set, a COLMAP workspace or MegaDepth,
+    found by its layout: learned.data.open_training_data) and where a photo collection's sky comes from."""
+    p.add_argument("--scenes", default=None, metavar="A,B",
+                   help="train on these scenes only (comma-separated; the split is then ignored; "
+                        "`physrelight train scenes --data DIR` lists them)")
+    p.add_argument("--sky", choices=("auto", "none"), default="auto",
+                   help="a photo collection's photos without masks/NAME.png (COLMAP's mask convention, black = "
+                        "sky): the shipped sky segmenter's sky, kept in memory (auto, default) or no sky (none)")
+
+
+def _data_selection_config(args: argparse.Namespace) -> dict:
+    return {"scenes": getattr(args, "scenes", None), "sky": getattr(args, "sky", "auto")}
+
+
+def _list_scenes(args: argparse.Namespace) -> int:
+    from physrelight.collections import find_layout, split_of
+
+    from .data import list_scenes
+
+    layout = find_layout(args.data)
+    for name in list_scenes(args.data):
+        print(f"{name}\t{split_of(name)}")
+    print(f"{args.data}: {layout} layout", file=sys.stderr)
+    return 0
+
+
+def _add_data_stages(tsub: argparse._SubParsersAction) -> None:
+    """``train scenes``: the scenes of a data folder and their splits."""
+    p = tsub.add_parser("scenes", help="list the scenes of --data (synth set, COLMAP workspace(s) or MegaDepth) "
+                                       "with their split")
+    p.add_argument("--data", required=True, help="data folder")
+    p.set_defaults(handler=_list_scenes)
 
 
 def _mirror(p: argparse.ArgumentParser) -> None:
@@ -444,6 +480,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     inv = tsub.add_parser("inverse", help="self-supervised inverse rendering network")
     _common(inv)
     _mirror(inv)
+    _data_selection(inv)
     inv.add_argument("--lighting-solve", choices=("project", "map", "map_relative"), default="project",
                      help="lighting from the decomposition: least squares + orthogonal projection onto the prior's "
                           "subspace (the paper; default), the most probable lighting in the subspace (map), or the "
@@ -469,6 +506,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     sh = tsub.add_parser("shadow", help="ShadowNet on a trained inverse network")
     _common(sh)
     _mirror(sh)
+    _data_selection(sh)
     sh.add_argument("--inverse", required=True, help="inverse run folder or exported weights")
     sh.set_defaults(handler=_train_shadow, output_folders=("out",))
     _compute_options(sh)
@@ -512,3 +550,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     _add_sky_stages(tsub)
     _add_renderer_stages(tsub)
+    _add_data_stages(tsub)

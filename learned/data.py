@@ -10,6 +10,12 @@ A pair is two photos of one scene: view a under lighting la and view b under lig
 learner) and resized to the training resolution (area averaging for photos, nearest for
 depth and masks, intrinsics scaled to match).
 
+The data may also be a real photo collection (a COLMAP workspace or MegaDepth, read by
+:mod:`physrelight.collections`; :func:`open_training_data` finds the layout): it serves the same
+five keys, its photos are centre-cropped to a square (:func:`crop_square`, the principal point moved
+with it) before the resize, and photos without a sky mask get the shipped sky segmenter's
+(:func:`learned.collection_sky.segmenter_sky_fn`, passed in by training; kept in memory).
+
 Batches are a pure function of ``(seed, step, rank)`` (:meth:`PairSampler.batch`), so a
 resumed or distributed run sees exactly the batches an uninterrupted one would.
 
@@ -43,11 +49,15 @@ import torch.nn.functional as F
 
 from physrelight import camera, colour
 from physrelight.full_resolution import resize_short_side  # the core's: the relighter's working size uses it too
+from physrelight.collections import Collection, SkyFn, find_layout, open_collection
 from synth.dataset import SynthDataset, to_chw
 from synth.photo import PhotoParams, make_photo, sample_photo_params
 
-__all__ = ["Batch", "PairSampler", "check_under_ev", "degrade_photo", "evenly_spread", "load_photo", "mirror_view",
-           "pooled_mvs_normals", "resize_short_side", "resize_view"]
+__all__ = ["Batch", "PairSampler", "TrainingData", "check_under_ev", "crop_square", "data_notes", "degrade_photo",
+           "evenly_spread", "list_scenes", "load_photo", "mirror_view", "open_training_data", "pooled_mvs_normals",
+           "resize_short_side", "resize_view"]
+
+TrainingData = SynthDataset | Collection
 
 T = TypeVar("T")
 
@@ -245,7 +255,95 @@ def degrade_photo(image: torch.Tensor, rng: np.random.Generator,
     return to_chw(linear).float(), params
 
 
-def load_photo(ds: SynthDataset, scene: str, view: int, light: int, res: int,
+def crop_square(image: torch.Tensor, depth: torch.Tensor, sky: torch.Tensor, K: torch.Tensor, mvs_scale: int = 1
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The centred square of one view (a real photo is rarely square; the networks train on squares).
+
+    Args:
+        image: ``(C, H, W)``; depth ``(1, s H, s W)`` with ``s = mvs_scale``; sky ``(1, H, W)``; K ``(3, 3)``
+            at the photo's resolution.
+
+    Returns:
+        The same four cropped to ``min(H, W)`` (depth to ``s`` times that), the principal point moved by
+        the crop's offset (``cx - x0, cy - y0``); the inputs themselves when already square.
+    """
+    h, w = image.shape[-2:]
+    if h == w:
+        return image, depth, sky, K
+    n = min(h, w)
+    y0, x0 = (h - n) // 2, (w - n) // 2
+    k = K.clone()
+    k[0, 2] -= x0
+    k[1, 2] -= y0
+    s = mvs_scale
+    return (image[..., y0:y0 + n, x0:x0 + n], depth[..., s * y0:s * (y0 + n), s * x0:s * (x0 + n)],
+            sky[..., y0:y0 + n, x0:x0 + n], k)
+
+
+def _scene_list(scenes: str | Sequence[str] | None) -> list[str] | None:
+    if scenes is None:
+        return None
+    names = [s.strip() for s in scenes.split(",")] if isinstance(scenes, str) else [str(s) for s in scenes]
+    if not names or not all(names):
+        raise ValueError(f"scenes must name at least one scene, without empty names, got {scenes!r}")
+    return names
+
+
+def open_training_data(root: str | Path, split: str = "train", scenes: str | Sequence[str] | None = None,
+                       sky_fn: SkyFn | None = None) -> TrainingData:
+    """The self-supervised data in ``root``, whatever its layout (:func:`physrelight.collections.find_layout`):
+    a synth set (:class:`synth.dataset.SynthDataset`, ``mode="self_supervised"``) or a photo collection
+    (:class:`physrelight.collections.Collection`). Every file is checked here, before any run folder is made.
+
+    Args:
+        split: the scenes' split (by the hash of their names, the same rule for both); ignored when
+            ``scenes`` names them.
+        scenes: ``"a,b"`` or a list: only these scenes (an unknown name is a ``ValueError`` listing the known).
+        sky_fn: for a collection's photos without a mask file, ``photo (H, W, 3) -> sky (H, W) bool``
+            (training passes the shipped segmenter's, :func:`learned.collection_sky.segmenter_sky_fn`);
+            None: no sky.
+    """
+    names = _scene_list(scenes)
+    if find_layout(root) == "synth":
+        ds = SynthDataset(root, split="all" if names else split, mode="self_supervised")
+        if names:
+            missing = [n for n in names if n not in ds.scenes]
+            if missing:
+                raise ValueError(f"{root}: no scene {', '.join(map(repr, missing))}; it has {', '.join(ds.scenes)}")
+            ds.scenes = sorted(set(names))
+            ds.items = [it for it in ds.items if it.scene in ds.scenes]
+        return ds
+    return open_collection(root, split, names, sky_fn)
+
+
+def list_scenes(root: str | Path) -> list[str]:
+    """Every scene name in ``root``, whatever its split (``physrelight train scenes``)."""
+    if find_layout(root) == "synth":
+        return SynthDataset(root, split="all", mode="self_supervised").scenes
+    return open_collection(root, "all", validate=False).all_scenes
+
+
+def data_notes(ds: TrainingData) -> list[str]:
+    """One line per fact a training log should hold about its data: layout, scenes, photos, and for a
+    collection the photos skipped (no pose, no depth) and where each scene's sky comes from."""
+    if isinstance(ds, SynthDataset):
+        n = sum(ds.num_views(s) * ds.num_lights(s) for s in ds.scenes)
+        return [f"data: synth set {ds.root}, {len(ds.scenes)} scenes, {n} photos"]
+    lines = [f"data: {ds.layout} collection {ds.root}, {len(ds.scenes)} scenes, {len(ds)} photos"]
+    sky = ds.sky_sources()
+    for s, skipped in ds.skipped().items():
+        lines.append(f"data: {s}: {len(ds.photo_keys(s)) if s in ds.scenes else 0} photos, skipped "
+                     f"{skipped.get('no pose', 0)} without a pose and {skipped.get('no depth', 0)} without depth; "
+                     f"sky from {_SKY_WORDS.get(sky.get(s, 'none'), sky.get(s, 'none'))}")
+    return lines
+
+
+_SKY_WORDS = {"masks": "masks/ (COLMAP's mask convention, black = sky)",
+              "segmenter": "the shipped sky segmenter (kept in memory)", "none": "nowhere (no sky)",
+              "masks+segmenter": "masks/ where there, else the shipped sky segmenter (kept in memory)"}
+
+
+def load_photo(ds: TrainingData, scene: str, view: int, light: int, res: int,
                mvs_pooled: bool = False, stencil: str = "central") -> dict[str, torch.Tensor]:
     """One photo and its view data, linearised and resized (self-supervised keys only); with
     ``mvs_pooled`` also ``"mvs_normal"`` / ``"mvs_valid"`` from :func:`pooled_mvs_normals`, taken at
@@ -262,6 +360,7 @@ def load_photo(ds: SynthDataset, scene: str, view: int, light: int, res: int,
     if depth.shape[-2:] != tuple(s * ds.mvs_scale for s in image.shape[-2:]):
         raise ValueError(f"{scene} view {view}: mvs_depth is {tuple(depth.shape[-2:])}, expected the photo's "
                          f"{tuple(image.shape[-2:])} times the set's mvs_scale {ds.mvs_scale}")
+    image, depth, sky, K = crop_square(image, depth, sky, K, ds.mvs_scale)  # a collection's photos; synth's are square
     extra = {}
     if mvs_pooled:
         extra["mvs_normal"], extra["mvs_valid"] = pooled_mvs_normals(depth, camera.scale_intrinsics(K, ds.mvs_scale),
@@ -291,30 +390,41 @@ class PairSampler:
         degrade: batches carry ``network_image``, each photo through :func:`degrade_photo` (after any
             mirroring), drawn from a stream of ``(seed, step, rank)`` of its own; ``image`` stays clean.
         degrade_under_ev: :func:`degrade_photo`'s ``under_ev`` (needs ``degrade``).
+        scenes: only these scenes (``"a,b"`` or a list; the split is then ignored), see
+            :func:`open_training_data`.
+        data: an already opened dataset to draw from (``root``, ``split`` and ``scenes`` are then unused).
+
+    ``root`` may be a synth set or a photo collection (:func:`open_training_data`); the pairs are drawn
+    from each scene's :meth:`photo_keys`, so a synth set exported to a collection gives the same batches.
     """
 
     def __init__(self, root: str | Path, split: str = "train", res: int = 64, seed: int = 0,
                  cache: bool = True, mirror: bool = False, mvs_pooled: bool = False,
-                 stencil: str = "central", degrade: bool = False, degrade_under_ev: float = 0.0) -> None:
+                 stencil: str = "central", degrade: bool = False, degrade_under_ev: float = 0.0,
+                 scenes: str | Sequence[str] | None = None, data: TrainingData | None = None) -> None:
         if not (isinstance(res, int) and res >= 8):
             raise ValueError(f"res must be an integer >= 8, got {res!r}")
-        self.ds = SynthDataset(root, split=split, mode="self_supervised")
+        self.ds = data if data is not None else open_training_data(root, split, scenes)
         if not self.ds.scenes:
-            raise ValueError(f"{str(root)!r} has no scenes in split {split!r}")
+            hint = "; name scenes with --scenes or use --train-split all" if isinstance(self.ds, Collection) else ""
+            raise ValueError(f"{str(root)!r} has no scenes in split {split!r}{hint}")
         self.res, self.seed, self.cache, self.mirror = res, seed, cache, bool(mirror)
         self.mvs_pooled, self.stencil, self.degrade = bool(mvs_pooled), stencil, bool(degrade)
         check_under_ev(degrade_under_ev, "degrade_under_ev")
         if degrade_under_ev and not self.degrade:
             raise ValueError("degrade_under_ev needs degrade=True (it is one of degrade_photo's nuisances)")
         self.degrade_under_ev = degrade_under_ev
-        depth_res = int(self.ds.config["res"]) * self.ds.mvs_scale
+        if self.mvs_pooled and "res" not in self.ds.config:
+            raise ValueError("mvs_pooled needs photos of one size; this collection's differ")
+        depth_res = int(self.ds.config.get("res", res)) * self.ds.mvs_scale
         if self.mvs_pooled and depth_res % res:
             raise ValueError(f"mvs_pooled needs the MVS depth's resolution ({depth_res}: the dataset's "
                              f"{self.ds.config['res']} x mvs_scale {self.ds.mvs_scale}) to be a multiple of res ({res})")
         self._cache: dict[tuple[str, int, int], dict[str, torch.Tensor]] = {}
         self.scenes = self.ds.scenes
+        self._photo_keys = {s: self.ds.photo_keys(s) for s in self.scenes}
         for s in self.scenes:
-            if self.ds.num_views(s) * self.ds.num_lights(s) < 2:
+            if len(self._photo_keys[s]) < 2:
                 raise ValueError(f"scene {s} has a single photo; pairs need at least two")
 
     def photo(self, key: tuple[str, int, int]) -> dict[str, torch.Tensor]:
@@ -331,10 +441,11 @@ class PairSampler:
         out = []
         for _ in range(batch_size):
             s = self.scenes[int(rng.integers(len(self.scenes)))]
-            nv, nl = self.ds.num_views(s), self.ds.num_lights(s)
-            a = int(rng.integers(nv * nl))
-            b = (a + 1 + int(rng.integers(nv * nl - 1))) % (nv * nl)  # any other photo of the scene
-            out.append(((s, a // nl, a % nl), (s, b // nl, b % nl)))
+            photos = self._photo_keys[s]  # (view, lighting), view-major: a synth set's v * nl + l
+            n = len(photos)
+            a = int(rng.integers(n))
+            b = (a + 1 + int(rng.integers(n - 1))) % n  # any other photo of the scene
+            out.append(((s, *photos[a]), (s, *photos[b])))
         return out
 
     def mirrored_pairs(self, batch_size: int, step: int, rank: int = 0) -> list[bool]:

@@ -53,7 +53,9 @@ class RunConfig:
             if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
         if not Path(self.data, "manifest.json").is_file():
-            raise ValueError(f"{self.data!r} is not a dataset folder (no manifest.json)")
+            from physrelight.collections import find_layout
+
+            find_layout(self.data)  # a photo collection (COLMAP, MegaDepth) is data too; else a ValueError
         unknown = set(self.weights) - set(known_weights)
         if unknown:
             raise ValueError(f"unknown loss weights {sorted(unknown)}; known: {sorted(known_weights)}")

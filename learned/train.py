@@ -30,6 +30,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -40,10 +41,13 @@ import torch
 import torch.distributed as dist
 
 from physrelight import image_model, io
+from physrelight.collections import find_layout
 from physrelight.lighting_prior import LightingPrior
+from synth.dataset import SynthDataset
 
 from . import checkpoint as ckpt
-from .data import PairSampler, check_under_ev
+from .collection_sky import segmenter_sky_fn
+from .data import PairSampler, check_under_ev, data_notes, open_training_data
 from .evaluate import evaluate
 from .lighting import load_prior
 
@@ -91,6 +95,8 @@ class TrainConfig(RunConfig):
     mvs_pooled: bool = False  # MVS normals at the dataset's resolution, pooled (learned.data.pooled_mvs_normals)
     degrade: bool = False  # the network sees photos with camera nuisances put back (learned.data.degrade_photo)
     degrade_under_ev: float = 0.0  # and, half the time, up to this many stops under-exposed, metered back
+    scenes: str | None = None  # "a,b": only these scenes of data (its split ignored); learned.data.open_training_data
+    sky: str = "auto"  # a photo collection's photos without a mask: the shipped segmenter's sky ("auto") or none
     weights: dict[str, float] = field(default_factory=lambda: LossWeights().as_dict())
     progress: bool = True
     device: str = "auto"  # auto | cpu | cuda | mps (learned.runs.resolve_device)
@@ -116,6 +122,8 @@ class TrainConfig(RunConfig):
             raise ValueError(f"mvs_stencil must be one of {MVS_STENCILS}, got {self.mvs_stencil!r}")
         if self.init is not None and not Path(self.init).exists():
             raise ValueError(f"init {self.init!r} does not exist (a {self.stage} run folder or weights file)")
+        if self.sky not in ("auto", "none"):
+            raise ValueError(f"sky must be 'auto' or 'none', got {self.sky!r}")
         if not isinstance(self.mirror, bool):
             raise ValueError(f"mirror must be True or False, got {self.mirror!r}")
         if not isinstance(self.mvs_pooled, bool):
@@ -233,13 +241,23 @@ def _cpu_copy(model: torch.nn.Module) -> torch.nn.Module:
 
 def _train(config: TrainConfig, rank: int, world: int, device: torch.device) -> dict[str, Any]:
     run = Path(config.out)
+    # The data (synth set or photo collection) is opened and every file checked before the run folder exists.
+    collection = find_layout(config.data) != "synth"  # its photos' sky: masks/, else the shipped segmenter's
+    data = open_training_data(config.data, config.train_split, config.scenes,
+                              segmenter_sky_fn() if collection and config.sky == "auto" else None)
     if rank == 0:
         (run / "panels").mkdir(parents=True, exist_ok=True)
+        for line in data_notes(data):
+            print(line, file=sys.stderr)
     _barrier()
     prior = load_prior(config.prior)
     sampler = PairSampler(config.data, split=config.train_split, res=config.res, seed=config.seed,
                           mirror=config.mirror, mvs_pooled=config.mvs_pooled, stencil=config.mvs_stencil,
-                          degrade=config.degrade, degrade_under_ev=config.degrade_under_ev)
+                          degrade=config.degrade, degrade_under_ev=config.degrade_under_ev, data=data)
+    # Validation reads ground truth: a photo collection has none, so without --val-data it is skipped.
+    can_validate = config.val_data is not None or isinstance(data, SynthDataset)
+    if rank == 0 and not can_validate:
+        print(f"data: {config.data} has no ground truth and no --val-data was given: no validation", file=sys.stderr)
     weights = LossWeights(**config.weights)
 
     torch.manual_seed(config.seed)
@@ -324,7 +342,7 @@ def _train(config: TrainConfig, rank: int, world: int, device: torch.device) -> 
                                                              "world_size": world, "device_used": str(device)},
                                      scalers=scalers, device=device)
             _barrier()
-        if done % config.val_every == 0 or done == config.steps:
+        if can_validate and (done % config.val_every == 0 or done == config.steps):
             if rank == 0:  # on the CPU, in fp32: the same held-out figures whatever trained the weights
                 metrics = validate(_cpu_copy(model) if config.stage == "inverse" else _cpu_copy(teacher), prior,
                                    config, shadow_net=_cpu_copy(model) if config.stage == "shadow" else None,

@@ -46,6 +46,7 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     "relight": Subcommand("learned.relight_cli", "relight one outdoor photo to a new lighting (shipped weights)"),
     "synth": Subcommand("synth.cli", "render a synthetic multi-view x multi-illumination dataset with Mitsuba",
                         ("synth",)),
+    "export": Subcommand("synth.export", "write a synth set in a real collection's layout (COLMAP, MegaDepth)"),
     "train": Subcommand("learned.cli", "train, evaluate and export the networks (inverse, ShadowNet, renderer, "
                                        "SkyGAN, sky segmenter)"),
     "validate": Subcommand("validation.cli", "check the physics against path tracing and write a report",

@@ -3,6 +3,8 @@
 # the system LLVM that Mitsuba's llvm_ad_rgb variant loads, a virtual environment
 # with the CPU build of torch, and the package with all its extras.
 # Idempotent: a stamp keyed on pyproject.toml skips the pip step when nothing changed.
+# PHYSRELIGHT_COLMAP=1 also installs Debian's colmap (3.8; SIFT, matching and mapper on the CPU) for the
+# tests marked `colmap` (tests/synth/test_colmap_tool.py), which are skipped without it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${PHYSRELIGHT_VENV:-.venv}
@@ -25,6 +27,14 @@ if ! have_llvm; then
     [ "$(id -u)" -eq 0 ] || SUDO="sudo"
     $SUDO apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libllvm19 >/dev/null
+fi
+
+if [ "${PHYSRELIGHT_COLMAP:-0}" = "1" ] && ! command -v colmap >/dev/null 2>&1; then
+    echo "[setup] installing colmap (PHYSRELIGHT_COLMAP=1)"
+    SUDO=""
+    [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq colmap >/dev/null
 fi
 
 if [ ! -x "$VENV/bin/python" ]; then

@@ -15,7 +15,6 @@ Images come back as float32 numpy arrays ``(H, W, C)`` (``(H, W)`` for one chann
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
@@ -24,6 +23,7 @@ import numpy as np
 import torch
 
 from physrelight import io
+from physrelight.collections.common import split_of  # the rule photo collections split by too
 
 from .writer import FORMAT, VERSION
 
@@ -42,16 +42,6 @@ _LIGHT_FILES = {"radiance": "radiance.exr", "shadow": "shadow.exr", "direct_shad
 
 class GroundTruthAccessError(PermissionError):
     """Ground truth requested from a dataset opened in self-supervised mode."""
-
-
-def split_of(scene: str, fractions: tuple[float, float, float] = (0.8, 0.1, 0.1)) -> str:
-    """The split a scene belongs to, from a hash of its name: stable when scenes are added."""
-    u = int.from_bytes(hashlib.sha256(scene.encode()).digest()[:8], "big") / 2.0**64
-    if u < fractions[0]:
-        return "train"
-    if u < fractions[0] + fractions[1]:
-        return "val"
-    return "test"
 
 
 @dataclass(frozen=True)
@@ -127,6 +117,11 @@ class SynthDataset:
     def num_lights(self, scene: str) -> int:
         rec = self.record(scene)
         return rec["num_lights"] if "num_lights" in rec else len(rec["lights"])
+
+    def photo_keys(self, scene: str) -> list[tuple[int, int]]:
+        """Every photo of ``scene`` as ``(view, lighting)``, view-major (the interface photo collections
+        share: :meth:`physrelight.collections.Collection.photo_keys`)."""
+        return [(v, l) for v in range(self.num_views(scene)) for l in range(self.num_lights(scene))]
 
     def __len__(self) -> int:
         return len(self.items)
