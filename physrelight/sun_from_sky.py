@@ -54,9 +54,9 @@ from physrelight.panorama import camera_rays, level_camera, view_intrinsics
 from physrelight.sky_model import overcast_sky, sun_colour
 
 __all__ = ["AZIMUTH_STEP_DEG", "CLIP_LEVEL", "DARK_SKY_LEVEL", "EFFECTIVE_SAMPLES_PER_SR", "ELEVATIONS_DEG", "LOG_SIGMA",
-           "MAX_BLOCKS_PER_SIDE", "MAX_CLIPPED_SKY", "MAX_EXPONENT", "MIN_EXPONENT", "MIN_SKY_PIXELS", "MIXES", "PREVIEW_SIZE",
-           "SKY_KINDS", "SkyBlocks", "SUNSKY_TURBIDITY_TABLE", "SunPosterior", "estimate_sun_from_sky", "hosek_wilkie_sky",
-           "lighting_preview", "sky_blocks"]
+           "MAX_BLOCKS_PER_SIDE", "MAX_CLIPPED_SKY", "MAX_EXPONENT", "MIN_EXPONENT", "MIN_SKY_PIXELS", "MIXES",
+           "PREVIEW_SIZE", "SKY_KINDS", "SkyBlocks", "SUNSKY_TURBIDITY_TABLE", "SunPosterior", "estimate_sun_from_sky",
+           "hosek_wilkie_sky", "lighting_preview", "sky_blocks"]
 
 SUNSKY_TURBIDITY_TABLE = Path(__file__).resolve().parent / "data" / "sunsky_turbidity_table.safetensors"
 """Mitsuba 3's Hosek-Wilkie sky at turbidities 2-6 (``(5, 23, 31, 61, 3)`` float16, 1.3 MB), per turbidity in the
@@ -565,8 +565,8 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     blown = float(blocks.weight[blocks.clipped.all(-1)].sum())
     if blown > MAX_CLIPPED_SKY:
         # bounds alone do not shape a sky: every bright enough model satisfies them
-        return _no_sun(f"the sky is blown out ({blown:.0%} of it clipped in every channel > {MAX_CLIPPED_SKY:.0%})", yaw,
-                       "blown out")
+        return _no_sun(f"the sky is blown out ({blown:.0%} of it clipped in every channel > {MAX_CLIPPED_SKY:.0%})",
+                       yaw, "blown out")
 
     el = np.array(ELEVATIONS_DEG)
     az = np.arange(0.0, 360.0, AZIMUTH_STEP_DEG)
@@ -671,7 +671,8 @@ def lighting_preview(sh_world: Array, posterior: SunPosterior | None = None, K: 
         i = np.argmin(np.abs(t_el[..., None] - el), -1)
         j = np.argmin(np.abs((t_az[..., None] - az + 180.0) % 360.0 - 180.0), -1)
         region = posterior.credible_region(0.9)[i, j] & (t_el >= el[0] - 2.0)
-        edge = region & ~ndimage.binary_erosion(region, structure=np.ones((3, 3), bool), border_value=0)
+        # border_value 1: no outline along the seam (the region wraps round) or the zenith row
+        edge = region & ~ndimage.binary_erosion(region, structure=np.ones((3, 3), bool), border_value=1)
         arr = np.asarray(canvas).copy()
         arr[edge] = (0, 230, 255)
         canvas = Image.fromarray(arr)

@@ -85,7 +85,8 @@ def test_01_a_clear_sky_through_a_known_camera_gives_the_sun_within_5_degrees(tm
                                                                                capsys) -> None:
     """The schema (every key, types), the sun in ``relight --sun``'s convention within 5 deg of Mitsuba's (test 01
     of test_sun_from_sky), ``source`` "sky", the camera as given, ``sh_camera`` = the posterior's SH turned into the
-    camera (``D(R)``), the same bytes on a second run, and the preview (256 x 128) with the red ring where the sun is."""
+    camera (``D(R)``), the same bytes on a second run, and the preview (256 x 128) with the red ring where the sun
+    is."""
     from physrelight.sun_from_sky import estimate_sun_from_sky
 
     display, sky, s = clear_sky
