@@ -224,3 +224,23 @@ def test_07_relight_layers_writes_the_same_lighting_json(tmp_path: Path, clear_s
     assert (tmp_path / "layers" / "lighting.json").read_bytes() == (tmp_path / "lighting.json").read_bytes()
     assert ((tmp_path / "layers" / "lighting_preview.png").read_bytes()
             == (tmp_path / "lighting_preview.png").read_bytes())
+
+
+def test_08_the_field_of_view_comes_from_exif_unless_given(tmp_path: Path, capsys) -> None:
+    """A JPEG with ``FocalLengthIn35mmFilm`` 28: ``camera.fov_deg`` is the EXIF's (``io.read_photo``), said as
+    "exif"; ``--fov 35`` wins, said as "given"."""
+    from PIL import Image
+
+    rays = _rays()
+    photo, mask = _photo(tmp_path, np.full((H, W, 3), 0.6), rays[..., 1] > 0)
+    im = Image.open(photo)
+    exif = im.getexif()
+    exif.get_ifd(0x8769)[0xA405] = 28  # FocalLengthIn35mmFilm
+    jpg = tmp_path / "exif.jpg"
+    im.save(jpg, format="JPEG", quality=95, exif=exif)
+    fov = io.read_photo(jpg).fov_deg
+    assert fov is not None and abs(fov - 60.0) > 1.0
+    rec = _run([str(jpg), "--mask", str(mask), "--pitch", "0", "-o", str(tmp_path / "a.json")], capsys)
+    assert rec["camera"]["fov_source"] == "exif" and rec["camera"]["fov_deg"] == pytest.approx(fov, abs=1e-4)
+    rec = _run([str(jpg), "--fov", "35", "--mask", str(mask), "-o", str(tmp_path / "b.json")], capsys)
+    assert rec["camera"]["fov_source"] == "given" and rec["camera"]["fov_deg"] == 35.0
