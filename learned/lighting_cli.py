@@ -88,9 +88,6 @@ def estimate_lighting(relighter: Any, image: np.ndarray, *, radiance: bool = Fal
     # radiance at the display-like level relight uses
     photo = lin[0].permute(1, 2, 0).numpy() if radiance else np.asarray(image, dtype=np.float64)
     post = estimate_sun_from_sky(photo, sky[0, 0].numpy(), pitch_deg=pitch, fov_deg=float(fov_deg), linear=radiance)
-    small, small_sky = working_resolution(lin, sky, relighter.res)
-    with torch.no_grad():
-        estimate = relighter.decompose_linear(small, small_sky)["lighting"][0].double().numpy()  # (9, 3) camera
     summary = post.summary()
     if post.has_sun and post.credible_area_sr <= MAX_INFORMATIVE_AREA_SR:
         source, reason = "sky", ""
@@ -103,6 +100,12 @@ def estimate_lighting(relighter: Any, image: np.ndarray, *, radiance: bool = Fal
                       f"> {MAX_INFORMATIVE_AREA_SR:.2f} sr")
         else:
             reason = post.reason + (f" ({why})" if why else "")
+        small, small_sky = working_resolution(lin, sky, relighter.res)
+        if bool(small_sky.all()):
+            raise ValueError(f"the whole photo is sky and it tells no sun ({reason}): there is no scene to estimate "
+                             "the lighting from")
+        with torch.no_grad():  # the library's own estimate, what relight relights from: (9, 3) camera frame
+            estimate = relighter.decompose_linear(small, small_sky)["lighting"][0].double().numpy()
         sh_camera = estimate
         sh_world = np.asarray(sh.rotation(R.T, order=2)) @ estimate
         summary["sun"] = None

@@ -196,7 +196,8 @@ def _refused(capsys, args: list[str], match: str, folder: Path) -> None:
 
 
 def test_06_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path: Path, capsys) -> None:
-    """An unreadable photo, a mask of the wrong size, ``-o`` a folder, ``-o`` not a .json."""
+    """An unreadable photo, a mask of the wrong size, ``-o`` a folder, ``-o`` not a .json, and a photo that is all
+    sky (the mask's word) where the sky tells no sun: there is no scene to fall back on."""
     rays = _rays()
     photo, mask = _photo(tmp_path, np.full((H, W, 3), 0.6), rays[..., 1] > 0)
     bad = tmp_path / "bad.png"
@@ -209,6 +210,10 @@ def test_06_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path: Path, cap
     (tmp_path / "folder.json").mkdir()
     _refused(capsys, [str(photo), "-o", str(tmp_path / "folder.json")], "is a folder", tmp_path)
     _refused(capsys, [str(photo), "-o", str(tmp_path / "a.txt")], "must be a .json", tmp_path)
+    overcast = np.clip(np.asarray(linear_to_srgb(overcast_sky(rays)[..., None] * np.array([0.36, 0.4, 0.44]))), 0, 1)
+    grey, _ = _photo(tmp_path, overcast, np.ones((H, W), bool), "overcast")
+    _refused(capsys, [str(grey), "--pitch", str(PITCH), "--mask", str(tmp_path / "overcast_sky.png"),
+                      "-o", str(tmp_path / "a.json")], "the whole photo is sky and it tells no sun", tmp_path)
 
 
 def test_07_relight_layers_writes_the_same_lighting_json(tmp_path: Path, clear_sky, capsys) -> None:
