@@ -320,6 +320,13 @@ def _relight(args: argparse.Namespace) -> int:
                 layers = relighter.relight_layers(image, target, azimuth_deg=args.azimuth, linear=linear, **common)
     for w in {str(w.message) for w in caught if issubclass(w.category, UserWarning) and "NumPy array" not in str(w.message)}:
         print(f"physrelight: warning: {w}", file=sys.stderr)
+    if args.layers is not None:  # the sun and sky read from the photo (physrelight lighting), before any write
+        from .lighting_cli import estimate_lighting, write_lighting
+
+        lighting = estimate_lighting(
+            relighter, image, radiance=photo.radiance, sky_mask=layers["sky_mask"][..., 0] > 0.5,
+            fov_deg=common["fov_deg"], pitch_deg=args.pitch,
+            fov_source="given" if args.fov is not None else "exif" if photo.fov_deg is not None else "default")
     if args.sequence:
         _write_gif(out, frames, args.fps)
         print(f"{len(frames)} frames -> {out}")
@@ -339,14 +346,7 @@ def _relight(args: argparse.Namespace) -> int:
             if name not in LAYER_FILES:  # a layer the early check did not know of: never over an input either
                 check_not_input(d / f"{name}.png", inputs)
             io.write_png(d / f"{name}.png", layer_with_alpha(img, sky) if name in DECOMPOSITION_LAYERS else img)
-        # the sun and sky read from the photo (physrelight lighting), through the sky and camera relight used
-        from .lighting_cli import estimate_lighting, write_lighting
-
-        record, preview = estimate_lighting(
-            relighter, image, radiance=photo.radiance, sky_mask=sky, fov_deg=common["fov_deg"],
-            fov_source="given" if args.fov is not None else "exif" if photo.fov_deg is not None else "default",
-            pitch_deg=args.pitch)
-        write_lighting(d / "lighting.json", record, preview)
+        write_lighting(d / "lighting.json", *lighting)
         print(f"layers ({', '.join(layers)}, lighting.json, lighting_preview.png) -> {d}")
     print(f"relit {image.shape[1]}x{image.shape[0]} -> {out}")
     return 0
