@@ -43,7 +43,8 @@ meters the relit photo as a camera would (the foreground to the photo's key, mid
 a dark photo, never clipping the sky); ``keep`` keeps the camera's settings; a number adds
 stops to ``keep``. ``--sequence N`` sweeps the azimuth over 360 degrees in N frames (GIF).
 
-``--layers DIR`` writes ``relit``, ``sky_mask`` (white = sky) and the decomposition's layers. Those
+``--layers DIR`` writes ``relit``, ``sky_mask`` (white = sky), the decomposition's layers and the sun and sky read
+from the photo (``lighting.json`` and ``lighting_preview.png``, as ``physrelight lighting`` writes them). Those
 (:data:`DECOMPOSITION_LAYERS`) are computed over the whole photo but describe surfaces, so on the sky they
 mean nothing: they are written as RGBA, transparent on the sky (their colour values kept), so that a viewer
 shows the foreground's albedo, normals, shadows and shading alone.
@@ -271,6 +272,8 @@ def _relight(args: argparse.Namespace) -> int:
     check_not_input(out, inputs)
     for name in LAYER_FILES if args.layers is not None else ():  # the folder may hold the photo, not a layer's name
         check_not_input(Path(args.layers) / f"{name}.png", inputs)
+    for name in ("lighting.json", "lighting_preview.png") if args.layers is not None else ():
+        check_not_input(Path(args.layers) / name, inputs)
     if args.sequence:
         _check_sequence(args.sequence, 1, 1)  # the frame cap, before the photo is read
     photo = io.read_photo(args.photo)  # one-line ValueError for missing, corrupt or palette files
@@ -317,6 +320,13 @@ def _relight(args: argparse.Namespace) -> int:
                 layers = relighter.relight_layers(image, target, azimuth_deg=args.azimuth, linear=linear, **common)
     for w in {str(w.message) for w in caught if issubclass(w.category, UserWarning) and "NumPy array" not in str(w.message)}:
         print(f"physrelight: warning: {w}", file=sys.stderr)
+    if args.layers is not None:  # the sun and sky read from the photo (physrelight lighting), before any write
+        from .lighting_cli import estimate_lighting, write_lighting
+
+        lighting = estimate_lighting(
+            relighter, image, radiance=photo.radiance, sky_mask=layers["sky_mask"][..., 0] > 0.5,
+            fov_deg=common["fov_deg"], pitch_deg=args.pitch,
+            fov_source="given" if args.fov is not None else "exif" if photo.fov_deg is not None else "default")
     if args.sequence:
         _write_gif(out, frames, args.fps)
         print(f"{len(frames)} frames -> {out}")
@@ -336,7 +346,8 @@ def _relight(args: argparse.Namespace) -> int:
             if name not in LAYER_FILES:  # a layer the early check did not know of: never over an input either
                 check_not_input(d / f"{name}.png", inputs)
             io.write_png(d / f"{name}.png", layer_with_alpha(img, sky) if name in DECOMPOSITION_LAYERS else img)
-        print(f"layers ({', '.join(layers)}) -> {d}")
+        write_lighting(d / "lighting.json", *lighting)
+        print(f"layers ({', '.join(layers)}, lighting.json, lighting_preview.png) -> {d}")
     print(f"relit {image.shape[1]}x{image.shape[0]} -> {out}")
     return 0
 

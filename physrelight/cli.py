@@ -2,7 +2,7 @@
 
 This is the one module of :mod:`physrelight` that reaches up into ``synth``, ``learned`` and
 ``validation``. Each subcommand's parser lives with its stage (``synth/cli.py``,
-``learned/cli.py``, ``learned/relight_cli.py``, ``validation/cli.py``,
+``learned/cli.py``, ``learned/relight_cli.py``, ``learned/lighting_cli.py``, ``validation/cli.py``,
 ``validation/bench/cli.py``; ``demo`` here) and is imported only when that subcommand is on
 the command line: ``physrelight --help`` lists them from :data:`SUBCOMMANDS` without
 importing any stage, or torch, and answers at once.
@@ -44,6 +44,7 @@ class Subcommand:
 SUBCOMMANDS: dict[str, Subcommand] = {
     "demo": Subcommand(__name__, "the main job: SH relighting vs exact, then the learned pipeline vs path tracing"),
     "relight": Subcommand("learned.relight_cli", "relight one outdoor photo to a new lighting (shipped weights)"),
+    "lighting": Subcommand("learned.lighting_cli", "read the sun and sky from one outdoor photo (JSON and a preview)"),
     "synth": Subcommand("synth.cli", "render a synthetic multi-view x multi-illumination dataset with Mitsuba",
                         ("synth",)),
     "export": Subcommand("synth.export", "write a synth set in a real collection's layout (COLMAP, MegaDepth)"),

@@ -54,8 +54,9 @@ from physrelight.panorama import camera_rays, level_camera, view_intrinsics
 from physrelight.sky_model import overcast_sky, sun_colour
 
 __all__ = ["AZIMUTH_STEP_DEG", "CLIP_LEVEL", "DARK_SKY_LEVEL", "EFFECTIVE_SAMPLES_PER_SR", "ELEVATIONS_DEG", "LOG_SIGMA",
-           "MAX_BLOCKS_PER_SIDE", "MAX_CLIPPED_SKY", "MAX_EXPONENT", "MIN_EXPONENT", "MIN_SKY_PIXELS", "MIXES", "SkyBlocks",
-           "SUNSKY_TURBIDITY_TABLE", "SunPosterior", "estimate_sun_from_sky", "hosek_wilkie_sky", "sky_blocks"]
+           "MAX_BLOCKS_PER_SIDE", "MAX_CLIPPED_SKY", "MAX_EXPONENT", "MIN_EXPONENT", "MIN_SKY_PIXELS", "MIXES",
+           "PREVIEW_SIZE", "SKY_KINDS", "SkyBlocks", "SUNSKY_TURBIDITY_TABLE", "SunPosterior", "estimate_sun_from_sky",
+           "hosek_wilkie_sky", "lighting_preview", "sky_blocks"]
 
 SUNSKY_TURBIDITY_TABLE = Path(__file__).resolve().parent / "data" / "sunsky_turbidity_table.safetensors"
 """Mitsuba 3's Hosek-Wilkie sky at turbidities 2-6 (``(5, 23, 31, 61, 3)`` float16, 1.3 MB), per turbidity in the
@@ -84,6 +85,11 @@ DARK_SKY_LEVEL = 0.03
 """A display photo whose sky's median luminance (display value) is below this reads no sun (night)."""
 MAX_BLOCKS_PER_SIDE = 16
 """The sky is read in blocks of pixels, at most this many along the image's longer side."""
+SKY_KINDS = ("clear", "hazy", "overcast", "night", "blown out", "none")
+"""What :attr:`SunPosterior.sky_kind` says of a sky: a sun with the MAP overcast mix 0 or above 0; no sun because
+the sunless sky explains it best, it is too dark, too clipped, or there is too little of it."""
+PREVIEW_SIZE = (128, 256)
+"""``(H, W)`` of :func:`lighting_preview`'s lat-long image."""
 _REFINE_HALF_DEG, _REFINE_STEP_DEG = 6.0, 1.0
 _FLOOR = 1e-3  # linear values are floored here (relative to the sky's median) before the log
 _IRLS_STEPS = 2
@@ -253,6 +259,8 @@ class SunPosterior:
         level: ``(3,)`` the MAP's per-channel level ``a_c`` (photo linear units per unit of the model sky).
         exponent: the MAP's gamma-like exponent ``g``.
         camera_yaw_deg: the camera's heading (world azimuth of its forward direction).
+        sky_kind: what the sky is (:data:`SKY_KINDS`): ``"clear"`` (a sun, MAP mix 0), ``"hazy"`` (a sun, MAP mix
+            above 0), ``"overcast"``, ``"night"``, ``"blown out"``, ``"none"`` (too little sky to read).
     """
 
     azimuths_deg: np.ndarray
@@ -273,6 +281,7 @@ class SunPosterior:
     level: np.ndarray | None
     exponent: float | None
     camera_yaw_deg: float
+    sky_kind: str = "clear"
     _cell_sr: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
 
     def azimuth_marginal(self) -> np.ndarray:
@@ -336,6 +345,24 @@ class SunPosterior:
         if not (isinstance(height, int) and height >= 4):
             raise ValueError(f"height must be an integer >= 4, got {height!r}")
         return self.radiance(directions(height, 2 * height)).astype(np.float32)
+
+    def summary(self) -> dict:
+        """The posterior as plain JSON values: ``sun`` (``{"azimuth_deg", "elevation_deg"}`` in ``relight --sun``'s
+        convention, or None), ``sun_spread`` (``azimuth_std_deg``, ``elevation_std_deg``, ``credible_area_sr`` of the
+        90 % region, ``credible_level``), ``sun_probability``, ``sky_kind``, ``turbidity``, ``mix``, ``level``
+        (``[r, g, b]`` or None), ``exponent``, ``reason`` (empty with a sun)."""
+        sun = None if not self.has_sun else {"azimuth_deg": round(float(self.azimuth_deg), 3),
+                                              "elevation_deg": round(float(self.elevation_deg), 3)}
+        return {"sun": sun,
+                "sun_spread": {"azimuth_std_deg": round(float(self.azimuth_std_deg), 3),
+                               "elevation_std_deg": round(float(self.elevation_std_deg), 3),
+                               "credible_area_sr": round(float(self.credible_area_sr), 4), "credible_level": 0.9},
+                "sun_probability": round(float(self.sun_probability), 4), "sky_kind": self.sky_kind,
+                "turbidity": None if self.turbidity is None else float(self.turbidity),
+                "mix": None if self.mix is None else float(self.mix),
+                "level": None if self.level is None else [float(x) for x in self.level],
+                "exponent": None if self.exponent is None else round(float(self.exponent), 4),
+                "reason": self.reason}
 
     def sh(self) -> np.ndarray:
         """``(9, 3)`` order-2 radiance SH (world frame) of the MAP: the sky's map projected
@@ -436,7 +463,8 @@ def _irls(x: torch.Tensor, blocks: SkyBlocks) -> tuple[torch.Tensor, torch.Tenso
     return -EFFECTIVE_SAMPLES_PER_SR * blocks.solid_angle * cost, a, g
 
 
-def _no_sun(reason: str, yaw: float, sun_probability: float = 0.0, posterior: np.ndarray | None = None) -> SunPosterior:
+def _no_sun(reason: str, yaw: float, kind: str, sun_probability: float = 0.0,
+            posterior: np.ndarray | None = None) -> SunPosterior:
     el = np.array(ELEVATIONS_DEG)
     az = np.arange(0.0, 360.0, AZIMUTH_STEP_DEG)
     cell = _cell_solid_angles(el, len(az))
@@ -444,7 +472,8 @@ def _no_sun(reason: str, yaw: float, sun_probability: float = 0.0, posterior: np
     out = SunPosterior(azimuths_deg=az, elevations_deg=el, posterior=post, has_sun=False, reason=reason,
                        sun_probability=sun_probability, sun_direction=None, elevation_deg=None, azimuth_deg=None,
                        world_azimuth_deg=None, azimuth_std_deg=0.0, elevation_std_deg=0.0, credible_area_sr=0.0,
-                       turbidity=None, mix=None, level=None, exponent=None, camera_yaw_deg=yaw, _cell_sr=cell)
+                       turbidity=None, mix=None, level=None, exponent=None, camera_yaw_deg=yaw, sky_kind=kind,
+                       _cell_sr=cell)
     return _with_spread(out)
 
 
@@ -510,7 +539,7 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
 
     sky = mask & (rays[..., 1] > -0.05)  # a little below the horizon is kept (a pitch a little off)
     if int(sky.sum()) < MIN_SKY_PIXELS:
-        return _no_sun(f"too few sky pixels: {int(sky.sum())} < {MIN_SKY_PIXELS}", yaw)
+        return _no_sun(f"too few sky pixels: {int(sky.sum())} < {MIN_SKY_PIXELS}", yaw, "none")
     if clip_level is None and not linear:
         clip_level = CLIP_LEVEL
     if linear:
@@ -524,7 +553,7 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
         luminance = img[sky] @ np.array(LUMINANCE)
         if float(np.median(luminance)) < DARK_SKY_LEVEL:
             return _no_sun(f"the sky is too dark to read (median display luminance {float(np.median(luminance)):.3f}"
-                           f" < {DARK_SKY_LEVEL})", yaw)
+                           f" < {DARK_SKY_LEVEL})", yaw, "night")
         lin = np.asarray(srgb_to_linear(img))
         clipped = img >= clip_level if clip_level is not None else np.zeros(img.shape, bool)
         clip_value = float(srgb_to_linear(np.array(clip_level))) if clip_level is not None else 0.0
@@ -532,11 +561,12 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     pixel_sr = np.clip(rays @ fwd, 0, 1) ** 3 / abs(float(Kc[0, 0] * Kc[1, 1]))
     blocks = sky_blocks(lin, clipped, sky, rays, clip_value, pixel_sr)
     if len(blocks.weight) < 4:
-        return _no_sun(f"the sky covers too few blocks to read ({len(blocks.weight)} < 4)", yaw)
+        return _no_sun(f"the sky covers too few blocks to read ({len(blocks.weight)} < 4)", yaw, "none")
     blown = float(blocks.weight[blocks.clipped.all(-1)].sum())
     if blown > MAX_CLIPPED_SKY:
         # bounds alone do not shape a sky: every bright enough model satisfies them
-        return _no_sun(f"the sky is blown out ({blown:.0%} of it clipped in every channel > {MAX_CLIPPED_SKY:.0%})", yaw)
+        return _no_sun(f"the sky is blown out ({blown:.0%} of it clipped in every channel > {MAX_CLIPPED_SKY:.0%})",
+                       yaw, "blown out")
 
     el = np.array(ELEVATIONS_DEG)
     az = np.arange(0.0, 360.0, AZIMUTH_STEP_DEG)
@@ -560,7 +590,8 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
 
     i_t, i_m, i_e, i_a = np.unravel_index(int(np.argmax(joint)), joint.shape)
     if p_sun < 0.5:
-        out = _no_sun(f"the sunless (overcast) sky explains the sky best (sun probability {p_sun:.2f})", yaw, p_sun, post)
+        out = _no_sun(f"the sunless (overcast) sky explains the sky best (sun probability {p_sun:.2f})", yaw,
+                      "overcast", p_sun, post)
         return out
     # refine the MAP on a 1-degree grid round it, turbidity and mix searched again
     fe = np.clip(el[i_e] + np.arange(-_REFINE_HALF_DEG, _REFINE_HALF_DEG + 1e-9, _REFINE_STEP_DEG), 2.0, 90.0)
@@ -578,5 +609,76 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
                        world_azimuth_deg=a_map, azimuth_std_deg=0.0, elevation_std_deg=0.0, credible_area_sr=0.0,
                        turbidity=float(turbidities[j_t]), mix=float(mixes[j_m]),
                        level=np.exp(fit_a[j_t, j_m, j_e, j_a].double().numpy()), exponent=float(fg[j_t, j_m, j_e, j_a]),
-                       camera_yaw_deg=yaw, _cell_sr=cell)
+                       camera_yaw_deg=yaw, sky_kind="clear" if mixes[j_m] == 0.0 else "hazy", _cell_sr=cell)
     return _with_spread(out)
+
+
+def _latlong_pixel(d: np.ndarray, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Column and row (float) of unit world directions ``d (..., 3)`` in :func:`lighting_preview`'s picture."""
+    u = np.mod(np.arctan2(d[..., 0], -d[..., 2]) / (2 * math.pi) + 0.5, 1.0)  # straight ahead in the middle
+    v = np.arccos(np.clip(d[..., 1], -1.0, 1.0)) / math.pi
+    return u * width - 0.5, v * (height - 1)
+
+
+def lighting_preview(sh_world: Array, posterior: SunPosterior | None = None, K: Array | None = None,
+                     world_to_camera: Array | None = None, image_size: tuple[int, int] | None = None) -> np.ndarray:
+    """``(128, 256, 3)`` uint8 lat-long picture of an estimated lighting (:data:`PREVIEW_SIZE`), for a person to look
+    at: DESIGN.md's layout turned half a turn so that world -Z (straight ahead of ``relight``'s camera) is the middle
+    column and the azimuth grows to the right as ``relight --sun``'s does (the edges are behind the camera).
+
+    With a ``posterior`` that has a sun: its MAP sky (:meth:`SunPosterior.envmap`) above the horizon, flat dark grey
+    below it (the sky says nothing of the ground), the 90 % credible region outlined in cyan and the MAP sun as a red
+    ring. Without: the order-2 radiance SH ``sh_world (9, 3)`` (world frame) everywhere, clamped at 0. Either way the
+    frame of the camera (``K (3, 3)``, ``world_to_camera (3, 3)`` or ``(4, 4)``, ``image_size (H, W)``, when given)
+    is drawn in yellow. Tone-mapped: the 99th percentile luminance to 0.8, then the sRGB curve.
+    """
+    from PIL import Image, ImageDraw
+    from scipy import ndimage
+
+    from physrelight.colour import linear_to_srgb
+    from physrelight.envmap import directions
+
+    c = np.asarray(sh_world.detach().cpu() if isinstance(sh_world, torch.Tensor) else sh_world, dtype=np.float64)
+    if c.shape != (9, 3) or not np.all(np.isfinite(c)):
+        raise ValueError(f"sh_world must be finite order-2 SH of shape (9, 3), got {c.shape}")
+    h, w = PREVIEW_SIZE
+    d = directions(h, w).astype(np.float64)
+    d = np.roll(d, w // 2, axis=1)  # straight ahead in the middle
+    with_sun = posterior is not None and posterior.has_sun
+    above = d[..., 1] > 0
+    radiance = posterior.radiance(d) if with_sun else np.clip(np.asarray(sh.basis(d, order=2)) @ c, 0.0, None)
+    lum = radiance @ np.array(LUMINANCE)
+    white = float(np.percentile(lum[above] if with_sun else lum, 99.0))
+    scale = 0.8 / white if white > 0 else 1.0
+    img = np.asarray(linear_to_srgb(np.clip(radiance * scale, 0.0, 1.0)))
+    if with_sun:
+        img = np.where(above[..., None], img, 0.2)
+    canvas = Image.fromarray(np.round(img * 255).astype(np.uint8))
+    draw = ImageDraw.Draw(canvas)
+    if K is not None and world_to_camera is not None and image_size is not None:
+        R = np.asarray(world_to_camera, dtype=np.float64)[:3, :3]
+        ih, iw = image_size
+        rays = camera_rays(np.asarray(K, dtype=np.float64), R, ih, iw).numpy()[:, :, 0]
+        border = np.concatenate([rays[0], rays[-1], rays[:, 0], rays[:, -1]])
+        x, y = _latlong_pixel(border, h, w)
+        for xi, yi in zip(np.round(x).astype(int) % w, np.clip(np.round(y).astype(int), 0, h - 1)):
+            canvas.putpixel((int(xi), int(yi)), (255, 220, 0))
+    if with_sun:
+        # the credible region's cells, looked up per texel: its outline
+        el, az = posterior.elevations_deg, posterior.azimuths_deg
+        t_el = np.degrees(np.arcsin(np.clip(d[..., 1], -1, 1)))
+        t_az = np.degrees(np.arctan2(d[..., 0], -d[..., 2])) % 360.0
+        i = np.argmin(np.abs(t_el[..., None] - el), -1)
+        j = np.argmin(np.abs((t_az[..., None] - az + 180.0) % 360.0 - 180.0), -1)
+        region = posterior.credible_region(0.9)[i, j] & (t_el >= el[0] - 2.0)
+        # border_value 1: no outline along the seam (the region wraps round) or the zenith row
+        edge = region & ~ndimage.binary_erosion(region, structure=np.ones((3, 3), bool), border_value=1)
+        arr = np.asarray(canvas).copy()
+        arr[edge] = (0, 230, 255)
+        canvas = Image.fromarray(arr)
+        draw = ImageDraw.Draw(canvas)
+        x, y = _latlong_pixel(np.asarray(posterior.sun_direction, dtype=np.float64), h, w)
+        r = 4
+        for dx in (-w, 0, w):  # the ring wraps round the seam
+            draw.ellipse((x + dx - r, y - r, x + dx + r, y + r), outline=(255, 40, 40), width=2)
+    return np.asarray(canvas)

@@ -310,8 +310,10 @@ def test_09_surface_layers_are_transparent_on_the_sky_and_keep_their_values(phot
             a = np.asarray(im)
         if p.stem in DECOMPOSITION_LAYERS:
             np.testing.assert_array_equal(a[..., -1], np.where(mask, 0, 255))
+    # and the sun and sky read from the photo (physrelight lighting): its JSON and an RGB preview
     assert modes == {"relit": "RGB", "sky_mask": "L", "albedo": "RGBA", "normals": "RGBA", "shading": "RGBA",
-                     "shadow": "LA", "target_shadow": "LA"}
+                     "shadow": "LA", "target_shadow": "LA", "lighting_preview": "RGB"}
+    assert (ldir / "lighting.json").is_file()
 
 
 # The known-source track with the photo's sky kept and the camera's exposure: what the camera settings and
