@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from physrelight import data, envmap
@@ -85,3 +86,25 @@ def test_06_every_mask_beside_a_more_map_is_package_data_and_matches_its_map() -
             assert not sky.any(), name
         else:
             assert 0.05 < sky.mean() < 0.6, name
+
+
+def test_07_the_more_masks_are_what_their_script_writes() -> None:
+    """The PNGs beside the hdri_more maps are scripts/hdri_more_sky_masks.py's reviewed masks, byte for byte in
+    content: regenerate them deliberately when a rule changes. pm_forest has none (its sky through the canopy could
+    not be made trustworthy at 512 px), nor has pm_bridge (a walkway)."""
+    import importlib.util
+
+    from synth.panorama_sky import read_sky_mask
+
+    root = Path(__file__).resolve().parents[2]
+    spec = importlib.util.spec_from_file_location("hdri_more_sky_masks", root / "scripts" / "hdri_more_sky_masks.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert set(script.LEFT_OUT) == {"pm_forest"}
+    for name in data.hdri_names(collection="more"):
+        want = script.reviewed_mask(name)
+        path = data.hdri_sky_mask(name, collection="more")
+        if want is None:
+            assert path is None, name
+            continue
+        np.testing.assert_array_equal(read_sky_mask(path, want.shape), want, err_msg=name)
