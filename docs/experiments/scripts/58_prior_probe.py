@@ -4,6 +4,8 @@ synthetic held-out scenes (rule 1 of docs/experiments/58-prior-on-more-panoramas
     python docs/experiments/scripts/58_prior_probe.py fit -o docs/experiments/results/58_prior_more.npz
     python docs/experiments/scripts/58_prior_probe.py synthetic --candidate docs/experiments/results/58_prior_more.npz \
         -o docs/experiments/results/58_synthetic.json
+    python docs/experiments/scripts/58_prior_probe.py real-training --candidate docs/experiments/results/58_prior_more.npz \
+        -o docs/experiments/results/58_real_training.json
 
 ``fit`` fits the candidate (``fit_outdoor_prior(hdris="more")``) and checks that the shipped recipe
 (``hdris="shipped"``) reproduces the shipped prior. ``synthetic`` renders bench --quick's scenes once, makes its
@@ -86,6 +88,57 @@ def synthetic(candidate: Path, out: Path, bootstrap: int = 2000) -> None:
     tmp.replace(out)
 
 
+def real_training(candidate: Path, out: Path) -> None:
+    """Rule 2: ``proposed``'s shading error on the training-side crops of ``bench --real --quick`` (the same crops:
+    4 per panorama, seed 0, 45-75 deg, 4 x 4 rays), shipped prior against the candidate, as the bench computes it
+    for its stability table (the decomposition ``relight_full_resolution`` makes, on the segmenter's mask). Only
+    the training side: sunrise is not touched."""
+    from learned import Relighter
+    from learned.lighting import load_prior
+    from learned.relighter import working_resolution
+    from physrelight import envmap, sh
+    from physrelight.stats import hierarchical_bootstrap
+    from synth.panorama_crops import make_crops, shipped_panoramas
+    from validation.bench.real import more_panoramas
+    from validation.bench.real_metrics import SPHERE_NORMALS, shading_error
+
+    torch.set_num_threads(1)
+    shipped = Relighter.load()
+    cand = copy.copy(shipped)
+    cand.prior = load_prior(candidate)
+    panos = [p for p in shipped_panoramas() + more_panoramas() if p.group == "training"]
+    normals = sh.fibonacci_sphere(SPHERE_NORMALS)
+    rows = []
+    for pano in panos:
+        truth_w = np.asarray(envmap.irradiance_reference(pano.env.astype(np.float64), normals))
+        for c in make_crops(pano, 4, 0, fov_range=(45.0, 75.0), samples=4):
+            if c.stratum != "sky":
+                continue
+            lin = c.linear()
+            seg = shipped.photo_sky(lin)[0]
+            small, small_sky = working_resolution(shipped.denoised(lin), seg, shipped.res)
+            truth = truth_w * c.gain[None, :]
+            cam_normals = normals @ c.rotation.T
+            row = {"panorama": pano.name, "index": c.index}
+            for label, r in (("shipped", shipped), ("candidate", cand)):
+                L = r.decompose_linear(small.float(), small_sky.bool())["lighting"][0].double().numpy()
+                row[label] = shading_error(np.asarray(sh.irradiance(L, cam_normals)), truth)
+            rows.append(row)
+            print(row, flush=True)
+    groups = [r["panorama"] for r in rows]
+    res = {"crops": rows}
+    for label in ("shipped", "candidate"):
+        mi = hierarchical_bootstrap([r[label] for r in rows], groups, samples=2000, seed=0)
+        res[label] = {"mean": mi.mean, "lo": mi.lo, "hi": mi.hi}
+    d = [r["candidate"] - r["shipped"] for r in rows]
+    mi = hierarchical_bootstrap(d, groups, samples=2000, seed=0)
+    res["difference"] = {"mean": mi.mean, "lo": mi.lo, "hi": mi.hi}
+    print(json.dumps({k: v for k, v in res.items() if k != "crops"}))
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(json.dumps(res, indent=1))
+    tmp.replace(out)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -94,11 +147,16 @@ def main() -> int:
     s = sub.add_parser("synthetic")
     s.add_argument("--candidate", type=Path, required=True)
     s.add_argument("-o", "--output", type=Path, required=True)
+    t = sub.add_parser("real-training")
+    t.add_argument("--candidate", type=Path, required=True)
+    t.add_argument("-o", "--output", type=Path, required=True)
     args = ap.parse_args()
     if args.cmd == "fit":
         fit(args.output)
-    else:
+    elif args.cmd == "synthetic":
         synthetic(args.candidate, args.output)
+    else:
+        real_training(args.candidate, args.output)
     return 0
 
 
