@@ -18,8 +18,7 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from physrelight import data, envmap  # noqa: E402
-from synth.panorama_sky import (Correction, _zenith_deg, apply_corrections, mask_path,  # noqa: E402
-                                sky_mask_procedure, write_sky_mask)
+from synth.panorama_sky import Correction, apply_corrections, mask_path, sky_mask_procedure, write_sky_mask  # noqa: E402
 
 LEFT_OUT: dict[str, str] = {
     "pm_forest": "sky seen through a pine canopy at 512 px is texel-scale speckle mixed with needles; no rule tried "
@@ -58,8 +57,10 @@ def blue_above(env: np.ndarray, rows: tuple[int, int], cols: tuple[int, int], mi
 
 
 def upper_hemisphere(env: np.ndarray) -> np.ndarray:
-    """Every texel above the horizon (zenith angle below 90 deg)."""
-    return _zenith_deg(*env.shape[:2]) < 90.0
+    """Every texel above the horizon: zenith angle below 90 deg (row i at ``180 i / (H - 1)`` deg, DESIGN.md)."""
+    h, w = env.shape[:2]
+    zenith = 180.0 * np.arange(h) / (h - 1)
+    return np.repeat((zenith < 90.0)[:, None], w, axis=1)
 
 
 def pm_city(env: np.ndarray) -> np.ndarray:
