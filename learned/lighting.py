@@ -33,7 +33,8 @@ import numpy as np
 
 from physrelight.lighting_prior import LightingPrior, fit_lighting_prior
 
-__all__ = ["PRIOR_PATH", "WEIGHTS_DIR", "camera_rotation", "fit_outdoor_prior", "load_prior", "outdoor_lightings"]
+__all__ = ["HDRI_SETS", "PRIOR_PATH", "WEIGHTS_DIR", "camera_rotation", "fit_outdoor_prior", "load_prior",
+           "outdoor_lightings", "prior_hdris"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 PRIOR_PATH = WEIGHTS_DIR / "lighting_prior.npz"
@@ -60,15 +61,34 @@ def camera_rotation(rng: np.random.Generator) -> np.ndarray:
     return c2w.T
 
 
+HDRI_SETS = ("shipped", "more")
+"""Which outdoor maps the prior's HDRI samples come from: ``"shipped"``, the three outdoor maps of
+``physrelight/data/hdri`` (city, courtyard, forest); ``"more"``, those and the six outdoor maps of
+``physrelight/data/hdri_more`` (issue 43; the held-out maps never)."""
+
+
+def prior_hdris(which: str = "shipped") -> list[Path]:
+    """The outdoor maps of the HDRI set ``which`` (:data:`HDRI_SETS`), sorted by folder then name."""
+    from physrelight import data
+
+    if which not in HDRI_SETS:
+        raise ValueError(f"HDRI set must be one of {', '.join(HDRI_SETS)}, got {which!r}")
+    paths = [data.hdri(n) for n in data.hdri_names(kind="outdoor")]
+    if which == "more":
+        paths += [data.hdri(n, collection="more") for n in data.hdri_names(collection="more", kind="outdoor")]
+    return paths
+
+
 def outdoor_lightings(n_sky: int = 1000, n_hdri_per_map: int = 200, seed: int = 0,
-                      resolution: int = 32) -> np.ndarray:
+                      resolution: int = 32, hdris: str = "shipped") -> np.ndarray:
     """Outdoor lightings as order-2 radiance SH in random camera frames, photo units.
 
     Args:
         n_sky: number of sunsky/overcast samples.
-        n_hdri_per_map: samples per shipped outdoor HDRI.
+        n_hdri_per_map: samples per outdoor HDRI of the set ``hdris``.
         seed: same seed, same array.
         resolution: sky-map height used for the SH projection (the SH is exact for it).
+        hdris: the HDRI set (:data:`HDRI_SETS`, :func:`prior_hdris`).
 
     Returns:
         ``(N, 9, 3)`` float64, ``N = n_sky + n_hdri_per_map * maps``.
@@ -78,6 +98,7 @@ def outdoor_lightings(n_sky: int = 1000, n_hdri_per_map: int = 200, seed: int = 
 
     if n_sky < 0 or n_hdri_per_map < 0 or n_sky + n_hdri_per_map == 0:
         raise ValueError(f"need a positive number of samples, got n_sky={n_sky}, n_hdri_per_map={n_hdri_per_map}")
+    maps = prior_hdris(hdris)
     rng = np.random.default_rng(seed)
     out: list[np.ndarray] = []
 
@@ -95,7 +116,7 @@ def outdoor_lightings(n_sky: int = 1000, n_hdri_per_map: int = 200, seed: int = 
         else:
             light = sl.sunsky(sub, elevation_deg=elevation, turbidity=turbidity, resolution=resolution)
         add(light)
-    for path in sl.list_hdris():
+    for path in maps:
         for _ in range(n_hdri_per_map):
             azimuth = float(rng.integers(2 * resolution)) * 360.0 / (2 * resolution)
             add(sl.hdri(path, azimuth_deg=azimuth, resolution=resolution))
@@ -103,9 +124,10 @@ def outdoor_lightings(n_sky: int = 1000, n_hdri_per_map: int = 200, seed: int = 
 
 
 def fit_outdoor_prior(k: int = 18, n_sky: int = 1000, n_hdri_per_map: int = 200, seed: int = 0,
-                      path: str | Path | None = PRIOR_PATH) -> LightingPrior:
-    """Fit the whitened PCA prior (``k`` of 27 dimensions) and save it to ``path`` (None: do not save)."""
-    prior = fit_lighting_prior(outdoor_lightings(n_sky, n_hdri_per_map, seed), k)
+                      path: str | Path | None = PRIOR_PATH, hdris: str = "shipped") -> LightingPrior:
+    """Fit the whitened PCA prior (``k`` of 27 dimensions) on :func:`outdoor_lightings` of the HDRI set
+    ``hdris`` and save it to ``path`` (None: do not save)."""
+    prior = fit_lighting_prior(outdoor_lightings(n_sky, n_hdri_per_map, seed, hdris=hdris), k)
     if path is not None:
         prior.save(path)
     return prior

@@ -28,7 +28,7 @@ import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import torch
@@ -206,8 +206,14 @@ class RealCrops:
     sky mask (coverage > 1/2), as ``bench --real`` makes it. :meth:`batch` draws from the bank
     (half of them mirrored); the caller's photometric augmentation makes every draw another photo.
 
+    Several folders (a sequence, or one string of paths joined by ``os.pathsep``, as ``--real-panoramas
+    physrelight/data/hdri:physrelight/data/hdri_more`` gives it) pool their panoramas. Only maps with a reviewed
+    mask (``NAME_sky.png`` beside them) are used: a room's empty mask makes its views no-sky negatives (the
+    outdoor maps are the sky); a map without one (pm_forest, the walkway pm_bridge of hdri_more) is left out
+    (:attr:`left_out`), not masked by the unreviewed procedure.
+
     Args:
-        folder: a folder of lat-long ``.exr`` panoramas with their ``NAME_sky.png`` masks.
+        folder: a folder (or several, see above) of lat-long ``.exr`` panoramas with their ``NAME_sky.png`` masks.
         res: the views' size.
         exclude: panorama names (file stems) left out (leave-one-panorama-out runs).
         views: the bank's size.
@@ -217,22 +223,32 @@ class RealCrops:
         ValueError: no panorama left, or one of them is a held-out panorama (never trained on).
     """
 
-    def __init__(self, folder: str | Path, res: int, exclude: tuple[str, ...] = (), views: int = 1024,
-                 seed: int = 0) -> None:
-        from synth.panorama_crops import HELDOUT_DIR, load_panorama
+    def __init__(self, folder: str | Path | Sequence[str | Path], res: int, exclude: tuple[str, ...] = (),
+                 views: int = 1024, seed: int = 0) -> None:
+        import os
 
-        d = Path(folder)
-        if not d.is_dir():
-            raise ValueError(f"real panorama folder {str(d)!r} does not exist")
+        from synth.panorama_crops import HELDOUT_DIR, load_panorama
+        from synth.panorama_sky import mask_path
+
+        folders = ([Path(f) for f in str(folder).split(os.pathsep)] if isinstance(folder, (str, Path))
+                   else [Path(f) for f in folder])
+        for d in folders:
+            if not d.is_dir():
+                raise ValueError(f"real panorama folder {str(d)!r} does not exist")
         if isinstance(views, bool) or not isinstance(views, int) or views < 1:
             raise ValueError(f"views must be a positive integer, got {views!r}")
         held = {p.stem for p in HELDOUT_DIR.glob("*.exr")}
-        paths = sorted(p for p in d.glob("*.exr") if p.stem not in exclude)
+        paths = [p for d in folders for p in sorted(d.glob("*.exr")) if p.stem not in exclude]
         bad = [p.name for p in paths if p.stem in held or p.resolve().parent == HELDOUT_DIR.resolve()]
         if bad:
             raise ValueError(f"{bad} are held-out panoramas: they are scored, never trained on")
+        self.left_out = [p.stem for p in paths if not mask_path(p).is_file()]
+        """Maps without a reviewed sky mask, left out (file stems)."""
+        paths = [p for p in paths if mask_path(p).is_file()]
         if not paths:
-            raise ValueError(f"no .exr panorama left in {str(d)!r} (excluded: {list(exclude)})")
+            where = ", ".join(repr(str(d)) for d in folders)
+            raise ValueError(f"no .exr panorama left in {where} with its NAME_sky.png mask "
+                             f"(excluded: {list(exclude)}; without a mask: {self.left_out})")
         self.panoramas = [load_panorama(p, "training") for p in paths]
         self.res = res
         rng = np.random.default_rng([seed, 11])

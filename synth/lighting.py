@@ -93,6 +93,7 @@ __all__ = [
     "HDRI_DIR",
     "INDOOR_HDRIS",
     "KINDS",
+    "KINDS_FILE",
     "Lighting",
     "SUNSKY_ELEVATION_RANGE",
     "SUN_RADIUS_DEG",
@@ -102,6 +103,7 @@ __all__ = [
     "eval_emitter",
     "evening",
     "hdri",
+    "is_indoor_hdri",
     "list_hdris",
     "overcast",
     "sample_lighting",
@@ -131,6 +133,25 @@ HDRI_DIR = Path(__file__).resolve().parents[1] / "physrelight" / "data" / "hdri"
 """The maps that ship with the package (CC0): city, courtyard, forest, studio."""
 INDOOR_HDRIS = frozenset({"studio"})
 """Map names (file stems) left out of outdoor sampling unless asked for."""
+KINDS_FILE = "kinds.json"
+"""A folder's map kinds (``{"NAME": "outdoor" | "indoor" | "walkway"}``, as ``physrelight/data/hdri_more`` has):
+a map named there as anything but ``outdoor`` is left out of outdoor sampling like :data:`INDOOR_HDRIS`."""
+
+
+def is_indoor_hdri(path: str | os.PathLike) -> bool:
+    """Whether the map at ``path`` is not an outdoor one: its stem in :data:`INDOOR_HDRIS`, or a kind other than
+    ``outdoor`` in the :data:`KINDS_FILE` beside it."""
+    p = Path(path)
+    if p.stem in INDOOR_HDRIS:
+        return True
+    kinds_file = p.parent / KINDS_FILE
+    if not kinds_file.is_file():
+        return False
+    try:
+        kinds = json.loads(kinds_file.read_text())
+    except (OSError, ValueError) as err:
+        raise ValueError(f"cannot read the map kinds {str(kinds_file)!r}: {err}") from None
+    return isinstance(kinds, dict) and kinds.get(p.stem, "outdoor") != "outdoor"
 
 EXPOSURE_TARGET = 0.18 * math.pi
 """``exposure_scale * Y(E_up)``: a white horizontal surface renders at 0.18."""
@@ -725,7 +746,7 @@ def hdri(path: str | os.PathLike, azimuth_deg: float = 0.0, split_sun: bool = Tr
         "scale": float(scale),
         "resolution": int(sky.shape[0]),
         "native_resolution": int(native),
-        "indoor": p.stem in INDOOR_HDRIS,
+        "indoor": is_indoor_hdri(p),
         "split_sun": bool(split_sun),
     }
     if sun_direction is not None:
@@ -779,13 +800,15 @@ def _rotate_azimuth(env: np.ndarray, azimuth_deg: float) -> np.ndarray:
 
 def list_hdris(hdri_dir: str | os.PathLike | None = None, include_indoor: bool = False) -> list[Path]:
     """Sorted ``*.exr`` maps in ``hdri_dir`` (default: the shipped :data:`HDRI_DIR`),
-    leaving out :data:`INDOOR_HDRIS` unless ``include_indoor``."""
+    leaving out the indoor ones (:func:`is_indoor_hdri`: :data:`INDOOR_HDRIS`, or not ``outdoor`` in the folder's
+    :data:`KINDS_FILE`, e.g. ``synth --hdri-dir physrelight/data/hdri_more`` draws its six outdoor maps) unless
+    ``include_indoor``."""
     d = Path(hdri_dir) if hdri_dir is not None else HDRI_DIR
     if not d.is_dir():
         raise ValueError(f"HDRI folder {str(d)!r} does not exist")
     maps = sorted(p for p in d.iterdir() if p.suffix.lower() == ".exr" and p.is_file())
     if not include_indoor:
-        maps = [p for p in maps if p.stem not in INDOOR_HDRIS]
+        maps = [p for p in maps if not is_indoor_hdri(p)]
     if not maps:
         raise ValueError(f"HDRI folder {str(d)!r} holds no {'' if include_indoor else 'outdoor '}.exr maps")
     return maps

@@ -141,3 +141,25 @@ def test_06_a_run_with_real_views_is_seeded_and_resumes_bit_identically(tiny_dat
         train_sky(config("b", 8, real_exclude=()))
     with pytest.raises(ValueError, match="real_fraction"):
         config("c", 1, real_fraction=0.0)
+
+
+def test_02b_real_views_pool_folders_and_take_rooms_as_negatives(tmp_path) -> None:
+    """``hdri:hdri_more`` (os.pathsep-joined) pools both folders; a map without a reviewed mask is left out (not
+    masked by the procedure); the rooms' empty masks make no-sky views."""
+    import os
+
+    from learned.train_sky import RealCrops
+    from physrelight import data
+
+    _panorama(tmp_path, "plain")
+    crops = RealCrops(f"{tmp_path}{os.pathsep}{data.MORE_DIR}", 16, views=28, seed=0)
+    names = [p.name for p in crops.panoramas]
+    assert names[0] == "plain" and len(names) == 1 + 13
+    assert set(crops.left_out) == {"pm_bridge", "pm_forest"}
+    rooms = set(data.hdri_names(collection="more", kind="indoor"))
+    for k in range(28):  # the bank draws the panoramas in turn
+        if names[k % len(names)] in rooms:
+            assert not bool(crops.sky[k].any())
+    assert sum(bool(crops.sky[k].any()) for k in range(28) if names[k % len(names)] not in rooms) >= 6
+    with pytest.raises(ValueError, match="does not exist"):
+        RealCrops([tmp_path, tmp_path / "nowhere"], 16, views=1)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from physrelight import data, envmap
@@ -36,3 +37,74 @@ def test_03_the_maps_are_package_data() -> None:
     for name in data.hdri_names():
         assert data.hdri(name) in shipped and (data.HDRI_DIR / f"{name}_sky.png") in shipped
     assert any(i in ("physrelight*", "physrelight.data") for i in cfg["packages"]["find"]["include"])
+
+
+def test_04_the_fifteen_more_maps_by_collection_and_kind() -> None:
+    """``collection="more"`` gives issue 43's panoramas with the kinds of their ``kinds.json``; the default
+    collection is unchanged (test_01)."""
+    import json
+
+    kinds = json.loads((data.MORE_DIR / "kinds.json").read_text())
+    assert data.hdri_names(collection="more") == tuple(sorted(kinds)) and len(kinds) == 15
+    assert data.hdri_names(collection="more", kind="outdoor") == ("pm_city", "pm_dawn", "pm_forest", "pm_night",
+                                                                 "pm_sky", "pm_venice")
+    assert len(data.hdri_names(collection="more", kind="indoor")) == 8
+    assert data.hdri_names(collection="more", kind="walkway") == ("pm_bridge",)
+    assert data.hdri_names(kind="outdoor") == ("city", "courtyard", "forest")
+    assert data.hdri_names(kind="indoor") == ("studio",)
+    assert data.hdri_names(collection="heldout") == data.hdri_names(heldout=True) == ("sunrise",)
+    p = data.hdri("pm_sky", collection="more")
+    assert p == data.MORE_DIR / "pm_sky.exr" and p.is_file()
+    assert data.hdri_kind("pm_lab", collection="more") == "indoor" and data.hdri_kind("studio") == "indoor"
+    assert data.hdri_kind("sunrise", heldout=True) == "outdoor"
+    assert data.hdri_sky_mask("forest") == data.HDRI_DIR / "forest_sky.png"
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda: data.hdri("city", collection="more"), r"unknown HDRI of hdri_more 'city'; the shipped ones are pm_apartment"),
+    (lambda: data.hdri_names(collection="extra"), r"collection must be one of shipped, heldout, more, got 'extra'"),
+    (lambda: data.hdri_names(kind="outside"), r"kind must be one of outdoor, indoor, walkway, got 'outside'"),
+    (lambda: data.hdri_names(heldout=True, collection="more"), r"heldout=True .* cannot be combined with 'more'"),
+    (lambda: data.hdri_kind("moon", collection="more"), r"unknown HDRI of hdri_more 'moon'"),
+])
+def test_05_bad_collection_kind_or_name_is_refused_by_name(call, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def test_06_every_mask_beside_a_more_map_is_package_data_and_matches_its_map() -> None:
+    """A ``pm_NAME_sky.png`` is shipped with its map, has the map's size, and rooms have no sky at all."""
+    from synth.panorama_sky import read_sky_mask
+
+    for name in data.hdri_names(collection="more"):
+        mask = data.hdri_sky_mask(name, collection="more")
+        if mask is None:
+            continue
+        env = envmap.read(data.hdri(name, collection="more"))
+        sky = read_sky_mask(mask, env.shape[:2])
+        if data.hdri_kind(name, collection="more") == "indoor":
+            assert not sky.any(), name
+        else:
+            assert 0.05 < sky.mean() < 0.6, name
+
+
+def test_07_the_more_masks_are_what_their_script_writes() -> None:
+    """The PNGs beside the hdri_more maps are scripts/hdri_more_sky_masks.py's reviewed masks, byte for byte in
+    content: regenerate them deliberately when a rule changes. pm_forest has none (its sky through the canopy could
+    not be made trustworthy at 512 px), nor has pm_bridge (a walkway)."""
+    import importlib.util
+
+    from synth.panorama_sky import read_sky_mask
+
+    root = Path(__file__).resolve().parents[2]
+    spec = importlib.util.spec_from_file_location("hdri_more_sky_masks", root / "scripts" / "hdri_more_sky_masks.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert set(script.LEFT_OUT) == {"pm_forest"}
+    for name in data.hdri_names(collection="more"):
+        want = script.reviewed_mask(name)
+        path = data.hdri_sky_mask(name, collection="more")
+        if want is None:
+            assert path is None, name
+            continue
+        np.testing.assert_array_equal(read_sky_mask(path, want.shape), want, err_msg=name)

@@ -349,6 +349,22 @@ def test_09_hdri_sampling_uses_outdoor_maps_unless_indoor_ones_are_asked_for(tmp
     assert only.params["hdri"] == "sunny" and only.sky.shape == (128, 256, 3)
 
 
+def test_09b_a_folder_with_kinds_json_gives_only_its_outdoor_maps(tmp_path: Path) -> None:
+    """``synth --hdri-dir physrelight/data/hdri_more`` draws its six outdoor maps, never a room or the walkway; a
+    broken kinds file is refused by name."""
+    more = L.HDRI_DIR.parent / "hdri_more"
+    outdoor = {p.stem for p in L.list_hdris(more)}
+    assert outdoor == {"pm_city", "pm_dawn", "pm_forest", "pm_night", "pm_sky", "pm_venice"}
+    assert len(L.list_hdris(more, include_indoor=True)) == 15
+    drawn = {L.sample_lighting("hdri", seed, hdri_dir=more, resolution=16).params["hdri"] for seed in range(8)}
+    assert drawn <= outdoor and len(drawn) >= 2
+    assert L.hdri(more / "pm_lab.exr", resolution=16).params["indoor"] is True
+    envmap.write(tmp_path / "room.exr", envmap.read(more / "pm_lab.exr")[::4, ::4])
+    (tmp_path / "kinds.json").write_text("{not json")
+    with pytest.raises(ValueError, match=r"cannot read the map kinds .*kinds\.json"):
+        L.list_hdris(tmp_path)
+
+
 # ------------------------------------------------------------------ 10. IO and checks
 
 

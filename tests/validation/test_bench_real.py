@@ -28,8 +28,16 @@ def test_01_quick_run_writes_every_section_with_the_held_out_panorama_apart(quic
     report = json.loads((quick / "real.json").read_text())
     md = (quick / "real.md").read_text()
     assert report["command"] == f"physrelight bench --real --quick -o {quick}"
-    assert {c["panorama"] for c in report["crops"]} == {"city", "courtyard", "forest", "studio", "sunrise"}
-    assert len(report["crops"]) == 20
+    more_outdoor = {"pm_city", "pm_dawn", "pm_night", "pm_sky", "pm_venice"}  # hdri_more's masked outdoor maps
+    rooms = {"pm_apartment", "pm_esplanade", "pm_hall", "pm_lab", "pm_lobby", "pm_studio", "pm_warehouse",
+             "pm_workshop"}
+    assert {c["panorama"] for c in report["crops"]} == {"city", "courtyard", "forest", "studio", "sunrise"} \
+        | more_outdoor | rooms
+    assert len(report["crops"]) == 4 * 18
+    groups = {p["name"]: p["group"] for p in report["panoramas"]}
+    assert {n for n, g in groups.items() if g == "indoor"} == rooms | {"studio"}
+    assert {n for n, g in groups.items() if g == "training"} == {"city", "courtyard", "forest"} | more_outdoor
+    assert all(c["stratum"] == "no_sky" for c in report["crops"] if groups[c["panorama"]] == "indoor")
     assert set(report["summary"]) == {"heldout", "training", "indoor"}
     assert report["summary"]["heldout"]["panoramas"] == ["sunrise"]
     for title in ("(a) Sky segmentation", "(b) Lighting", "(c) The relit sky", "(d) Self-relighting", "(e) Panels",

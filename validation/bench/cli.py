@@ -31,7 +31,8 @@ panoramas (45-75 deg, level, pitch -5..20 deg, made into 8-bit photos) are score
 segmentation, (b) lighting from the photo, (c) the relit sky against the target panorama seen
 through the same camera, (d) self-relighting, with (e) panels; writes OUT/real.md, OUT/real.json,
 OUT/charts/real_summary.png and OUT/panels/. Default panoramas: the shipped ones (city, courtyard,
-forest: seen in training; studio: indoor, apart; sunrise: held out); --hdri-dir scores a folder of
+forest: seen in training; studio: indoor, apart; sunrise: held out) and physrelight/data/hdri_more's
+five masked outdoor maps (training side) and eight rooms (indoor); --hdri-dir scores a folder of
 your own lat-long .exr/.hdr maps. --quick: 4 crops per panorama, 2 targets; --full: 16 and 3.
 """
 

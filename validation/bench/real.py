@@ -58,7 +58,7 @@ from .real_metrics import (BOUNDARY_TOLERANCE, CAMERA_VARIANTS, ESTIMATES, PSNR_
                            shading_error, targets_for, top_rows_sky)
 
 __all__ = ["ESTIMATES", "PSNR_CAP", "REAL_LEVELS", "SEGMENTERS", "SELF_METHODS", "SKY_SOURCES", "RealLevel",
-           "brightness_sky", "level_stops", "run_real_bench", "score_crop", "shading_error", "top_rows_sky"]
+           "brightness_sky", "level_stops", "more_panoramas", "run_real_bench", "score_crop", "shading_error", "top_rows_sky"]
 
 @dataclass(frozen=True)
 class RealLevel:
@@ -249,6 +249,22 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
 # ----------------------------------------------------------------------------- the run
 
 
+def more_panoramas() -> list[Any]:
+    """The panoramas of ``physrelight/data/hdri_more`` (issue 43) that ``bench --real`` scores by default: every
+    ``outdoor`` map with a reviewed sky mask (``training``: the lighting prior and the segmenter may see them) and
+    every room (``indoor``: no sky, a negative). Not pm_forest (no trustworthy mask) nor pm_bridge (a walkway)."""
+    from physrelight import data
+    from synth.panorama_crops import load_panorama
+
+    out = []
+    for name in data.hdri_names(collection="more"):
+        kind = data.hdri_kind(name, collection="more")
+        if kind == "walkway" or data.hdri_sky_mask(name, collection="more") is None:
+            continue
+        out.append(load_panorama(data.hdri(name, collection="more"), "training" if kind == "outdoor" else "indoor"))
+    return out
+
+
 def run_real_bench(level: RealLevel, hdri_dir: str | Path | None, out_dir: str | Path, command: str,
                    threads: int = 2, progress: Callable[[str], None] = print, weights: str | Path | None = None,
                    seed: int = 0, fov_range: tuple[float, float] = (45.0, 75.0)) -> dict[str, Any]:
@@ -257,7 +273,8 @@ def run_real_bench(level: RealLevel, hdri_dir: str | Path | None, out_dir: str |
     Args:
         hdri_dir: a folder of lat-long ``.exr``/``.hdr`` panoramas (scored as group ``"user"``,
             masks by the procedure unless ``NAME_sky.png`` lies beside a map), or None: the
-            shipped panoramas (training side, studio apart, held-out sunrise).
+            shipped panoramas (training side, studio apart, held-out sunrise) and :func:`more_panoramas`
+            (five more outdoor maps on the training side, eight rooms beside studio).
         weights: the learned methods' weights folder (None: the shipped ones).
         seed: crops, photo noise and SkyGAN's noise.
         fov_range: the crops' horizontal field of view range in degrees.
@@ -274,7 +291,17 @@ def run_real_bench(level: RealLevel, hdri_dir: str | Path | None, out_dir: str |
     from .real_report import write_real_report
 
     t_start = time.perf_counter()
-    panoramas = folder_panoramas(hdri_dir) if hdri_dir is not None else shipped_panoramas()
+    if hdri_dir is not None:
+        panoramas = folder_panoramas(hdri_dir)
+        pool_of: dict[str, list[Any]] = {}
+    else:
+        shipped, more = shipped_panoramas(), more_panoramas()
+        # the shipped panoramas keep the target pool of every earlier run (their figures stay comparable with
+        # docs/experiments/bench-history.md); the new ones are relit to every outdoor map
+        pool_of = {p.name: shipped for p in shipped}
+        panoramas = ([p for p in shipped if p.group == "training"] + [p for p in more if p.group == "training"]
+                     + [p for p in shipped if p.group == "indoor"] + [p for p in more if p.group == "indoor"]
+                     + [p for p in shipped if p.group == "heldout"])
     relighter = Relighter.load(weights)
     before = torch.get_num_threads()
     torch.set_num_threads(threads)
@@ -292,7 +319,8 @@ def run_real_bench(level: RealLevel, hdri_dir: str | Path | None, out_dir: str |
             crops = make_crops(pano, level.crops, seed, fov_range=fov_range, samples=level.samples)
             crops_by_pano[pano.name] = crops
             for c in crops:
-                results.append(score_crop(relighter, c, targets_for(pano, target_pool, level.targets, c.index), truth,
+                pool = pool_of.get(pano.name, target_pool)
+                results.append(score_crop(relighter, c, targets_for(pano, pool, level.targets, c.index), truth,
                                           normals, seed))
             progress(f"{pano.name} ({pano.group}): {len(crops)} crops scored in {time.perf_counter() - t0:.0f} s")
         report = {

@@ -18,15 +18,16 @@ from .real_metrics import (BOUNDARY_TOLERANCE, CAMERA_VARIANTS, ESTIMATES, SEGME
                            shading_error, targets_for)
 
 GROUP_TITLES = {"heldout": "held out (sunrise)", "training": "training side (seen in training)",
-                "indoor": "indoor stress case (studio)", "user": "your panoramas"}
+                "indoor": "indoor (studio, the rooms)", "user": "your panoramas"}
 PANEL_COLUMNS = 4
 RELIGHT_DEFAULTS = dict(method="proposed", exposure="auto")
 """What `physrelight relight` passes by default that the Python API does not."""
-TRAINED = ("The training-side panoramas (city, courtyard, forest) are in the lighting prior's samples "
-           "(`learned/lighting.py`) and in synth's HDRI lightings, so in the training renders of every shipped "
-           "network (inverse network, ShadowNet, neural renderer, SkyGAN, sky segmenter): their figures are "
-           "marked *seen in training*. studio (indoor) is only a control. The held-out sunrise trained nothing, "
-           "fitted nothing and chose nothing.")
+TRAINED = ("The training-side panoramas (city, courtyard, forest; and, since issue 43, pm_city, pm_dawn, pm_night, "
+           "pm_sky, pm_venice of `physrelight/data/hdri_more`, relit to every outdoor map while the first three keep "
+           "their earlier targets) may be in the lighting prior's samples (`learned/lighting.py`), in synth's HDRI "
+           "lightings and in the sky segmenter's real crops: their figures are marked *seen in training*. studio and "
+           "the eight rooms of hdri_more (indoor) are only controls: no crop of theirs has sky. The held-out sunrise "
+           "trained nothing, fitted nothing and chose nothing.")
 
 
 def _interval(values: Sequence[float], groups: Sequence[str], samples: int, seed: int = 0) -> dict[str, Any] | None:
