@@ -142,7 +142,9 @@ class RelightRequest:
             SkyGAN is shipped, else ``"keep"``. ``"target"`` looks the target itself up through the photo's camera
             (:func:`physrelight.sky_view.target_sky`), ``"fit"`` the sky model fitted to the target's SH
             (:func:`physrelight.sky_view.fitted_sky`), both in the relit foreground's units.
-        exposure: ``"keep"``, ``"auto"`` or stops (:func:`physrelight.exposure.exposure_gain`).
+        exposure: ``"auto"`` (the default, as the command line's ``--exposure``): meter the relit photo as a camera
+            would; ``"keep"``: the photo's camera settings; or stops added to ``"keep"``
+            (:func:`physrelight.exposure.exposure_gain`).
         fov_deg: the photo's horizontal field of view (its focal length, e.g. from EXIF).
         pitch_deg: the level camera's pitch; None: estimated from the sky's horizon
             (:func:`physrelight.horizon.estimate_pitch`). Ignored when ``world_to_camera`` is given.
@@ -163,7 +165,7 @@ class RelightRequest:
     new_sky: bool = True
     seed: int = 0
     sky_source: str | None = None
-    exposure: str | float = "keep"
+    exposure: str | float = "auto"
     fov_deg: float = DEFAULT_FOV_DEG
     pitch_deg: float | None = None
     source: Any = None

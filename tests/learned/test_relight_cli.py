@@ -241,11 +241,11 @@ def test_08_a_radiance_photo_is_relit_in_its_own_units(photo: Path, tmp_path: Pa
     display = io.read_image(photo)
     linear = colour.from_ldr(torch.from_numpy(display)).numpy()
     # to float rounding (the two decodings run on differently laid-out arrays)
-    np.testing.assert_allclose(relighter.relight(linear, str(FOREST), radiance=True),
-                               relighter.relight(display, str(FOREST)), atol=1e-5)
+    np.testing.assert_allclose(relighter.relight(linear, str(FOREST), radiance=True, exposure="keep"),
+                               relighter.relight(display, str(FOREST), exposure="keep"), atol=1e-5)
     hdr = linear * 40.0  # its 99.9th-percentile luminance well above 1
-    one = relighter.relight(hdr, str(FOREST), radiance=True, linear=True)
-    ten = relighter.relight(hdr * 10.0, str(FOREST), radiance=True, linear=True)
+    one = relighter.relight(hdr, str(FOREST), radiance=True, linear=True, exposure="keep")
+    ten = relighter.relight(hdr * 10.0, str(FOREST), radiance=True, linear=True, exposure="keep")
     np.testing.assert_allclose(ten, 10.0 * one, rtol=1e-4, atol=1e-6)
     same = relighter.relight(hdr, str(FOREST), source=str(FOREST), method="quotient", new_sky=False,
                              exposure="keep", radiance=True, linear=True)
@@ -384,3 +384,18 @@ def test_12_source_env_is_the_source_and_env_the_target(photo: Path, tmp_path: P
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)
     photo_linear = colour.from_ldr(torch.from_numpy(image)).numpy()
     assert np.abs(got - photo_linear).mean() > 0.01
+
+
+def test_13_the_apis_defaults_are_the_command_lines(photo: Path, tmp_path: Path) -> None:
+    """The same call gives the same picture: ``Relighter.relight(photo, target)`` at its defaults is what
+    ``physrelight relight photo --env MAP`` writes at its own (the automatic exposure included; issue 41), to 8-bit
+    rounding, and the camera's own settings (``exposure="keep"``) give another picture."""
+    from learned import Relighter
+
+    out = tmp_path / "relit.png"
+    assert main(["relight", str(photo), "--env", str(FOREST), "--quiet", "--threads", "1", "-o", str(out)]) == 0
+    relighter = Relighter.load()
+    api = relighter.relight(io.read_image(photo), str(FOREST))
+    assert np.abs(io.read_image(out) - api).max() <= 0.5 / 255 + 1e-4
+    keep = relighter.relight(io.read_image(photo), str(FOREST), exposure="keep")
+    assert np.abs(keep - api).mean() > 0.01

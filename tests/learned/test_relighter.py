@@ -285,7 +285,7 @@ def test_13_the_tuning_is_one_frozen_set_of_options_given_at_construction(religh
     assert other.options == RelightOptions(denoise=DENOISE, sky_grow=0.0) and relighter.options == RelightOptions()
     with pytest.raises(AttributeError):
         other.options.denoise = None  # frozen
-    assert RelightRequest().method == "proposed" and RelightRequest().exposure == "keep"
+    assert RelightRequest().method == "proposed" and RelightRequest().exposure == "auto"  # the command line's
     image, sky = photo
     with pytest.raises(TypeError, match="azimuth"):
         relighter.relight(image[:1], _target(3), sky_mask=sky[:1, 0], azimuth=30.0)
