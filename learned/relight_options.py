@@ -133,8 +133,9 @@ class RelightRequest:
             (:func:`learned.sky_segmentation.sky_mask_full_resolution`; when shipped, else no sky); when it finds
             none a ``UserWarning`` says why and only the foreground is relit.
         method: see ``Relighter.relight_linear`` (:data:`RELIGHT_METHODS`).
-        azimuth_deg: turn the target about the world's vertical axis first (degrees, counter-clockwise seen from
-            above; :func:`physrelight.target_lighting.rotate_azimuth`).
+        azimuth_deg: turn the target about the world's vertical axis first, in degrees clockwise seen from above,
+            as ``relight --sun``'s and ``--azimuth``'s angles count (a sun at azimuth ``a`` goes to ``a + azimuth_deg``;
+            :func:`physrelight.target_lighting.rotate_azimuth`, docs/conventions.md).
         sky: sky type of a sun-direction target (:data:`physrelight.target_lighting.SKY_TYPES`).
         new_sky: False keeps the photo's sky whatever ``sky_source`` says.
         seed: SkyGAN's noise (same seed, same sky).

@@ -432,7 +432,8 @@ class Relighter:
     def relight_sequence(self, image: Any, target: Any, azimuths_deg: Any, world_to_camera: Any = None,
                          sky_mask: Any = None, progress: bool = False, radiance: bool = False,
                          **request: Any) -> list[Any]:
-        """:meth:`relight` for each azimuth of ``azimuths_deg`` (degrees, e.g. a turning sun), the photo
+        """:meth:`relight` for each azimuth of ``azimuths_deg`` (degrees clockwise seen from above, as
+        :class:`RelightRequest`'s ``azimuth_deg``; e.g. a turning sun), the photo
         segmented and decomposed once: the same frames as separate :meth:`relight` calls, cheaper (display
         values, or linear radiance with ``linear``; ``radiance`` as for :meth:`relight_layers`; the rest
         :class:`RelightRequest`'s but ``azimuth_deg``). ``progress`` shows a progress bar."""

@@ -5,6 +5,11 @@ Targets are given in the *world* frame (Y up): SH coefficients ``(9, 3)``, an en
 ``(H, 2H, 3)`` or an EXR path) or a sun direction ``(3,)`` towards the sun (a sun of its elevation's colour plus a
 clear or overcast sky, :data:`SKY_TYPES`); they are rotated into the camera with ``world_to_camera`` (``(4, 4)``
 or its ``(3, 3)`` rotation; None: camera frame = world frame).
+
+Angles about the vertical follow one convention (docs/conventions.md): an azimuth is clockwise seen from above, from
+world -Z (straight ahead of a level camera) towards +X (its right), as ``relight --sun ELEV AZIM`` counts it, and
+turning a target by ``t`` degrees (:func:`rotate_azimuth`, ``Relighter.relight(..., azimuth_deg=t)``,
+``relight --azimuth t``) adds ``t`` to every direction's azimuth.
 """
 
 from __future__ import annotations
@@ -20,9 +25,9 @@ import torch
 from physrelight import rotations, sh
 from physrelight.image_input import as_rotation
 
-__all__ = ["SKY_TYPES", "as_lighting_batch", "camera_target", "clear_sky_sun", "overcast_level", "read_target",
-           "rotate_azimuth", "sky_map_kind", "sun_lighting", "sun_rgb", "sun_sky_map", "target_lighting", "target_sun",
-           "turned_camera"]
+__all__ = ["SKY_TYPES", "as_lighting_batch", "azimuth_turn", "camera_target", "clear_sky_sun", "overcast_level",
+           "read_target", "rotate_azimuth", "sky_map_kind", "sun_lighting", "sun_rgb", "sun_sky_map",
+           "target_lighting", "target_sun", "turned_camera"]
 
 SKY_TYPES = ("clear", "overcast")
 
@@ -194,12 +199,24 @@ def target_sun(target: Any, world_to_camera: Any = None, sky: str = "clear") -> 
     return None if coeffs is None else torch.as_tensor(sh.rotate(coeffs, as_rotation(world_to_camera)))
 
 
+def azimuth_turn(degrees: float) -> np.ndarray:
+    """``(3, 3)`` float64 the world rotation that turns a target by ``degrees`` about the vertical, clockwise seen
+    from above: every direction's azimuth (0 = world -Z, 90 = +X; :func:`physrelight.envmap.direction_from_angles`)
+    grows by ``degrees``. The one place the convention is built (:func:`rotate_azimuth`, :func:`turned_camera`):
+    :func:`physrelight.rotations.about_y` turns by the right-hand rule about +Y, counter-clockwise from above, so
+    this is ``about_y(-degrees)``."""
+    if not math.isfinite(float(degrees)):
+        raise ValueError(f"azimuth must be a finite number of degrees, got {degrees!r}")
+    return rotations.about_y(-float(degrees))
+
+
 def rotate_azimuth(target: Any, degrees: float) -> Any:
     """Turn a world-frame target (SH ``(9, 3)``, env map ``(H, 2H, 3)``, EXR path or sun direction ``(3,)``) by
-    ``degrees`` about +Y (the SH rotation is exact; env maps are projected first): a sun direction ``(3,)`` or
-    SH ``(9, 3)`` comes back."""
+    ``degrees`` about the vertical, clockwise seen from above (:func:`azimuth_turn`: a sun at azimuth ``a`` goes to
+    ``a + degrees``; the SH rotation is exact; env maps are projected first): a sun direction ``(3,)`` or SH
+    ``(9, 3)`` comes back."""
     target = read_target(target)
-    R = rotations.about_y(float(degrees))  # the same turn as turned_camera's, from one formula
+    R = azimuth_turn(degrees)  # the same turn as turned_camera's, from one formula
     t = np.asarray(target, dtype=np.float64) if not isinstance(target, torch.Tensor) else target.double().numpy()
     if t.shape == (3,):
         return R @ t
@@ -213,16 +230,18 @@ def rotate_azimuth(target: Any, degrees: float) -> Any:
 
 def turned_camera(world_to_camera: Any, azimuth_deg: float) -> np.ndarray:
     """``(3, 3)`` the camera rotation (of ``world_to_camera``, ``(4, 4)`` or ``(3, 3)``) that sees a target turned
-    by ``azimuth_deg`` about +Y as :func:`rotate_azimuth` turns it:
-    ``target'(w) = target(R_y^T w)``, so ``R = T R_y``."""
-    return np.asarray(world_to_camera, dtype=np.float64)[:3, :3] @ rotations.about_y(float(azimuth_deg))
+    by ``azimuth_deg`` as :func:`rotate_azimuth` turns it (clockwise seen from above):
+    ``target'(w) = target(R_t^T w)`` with ``R_t = azimuth_turn(azimuth_deg)``, so ``R = T R_t`` (the camera turned
+    the other way)."""
+    return np.asarray(world_to_camera, dtype=np.float64)[:3, :3] @ azimuth_turn(azimuth_deg)
 
 
 def camera_target(target: Any, world_to_camera: Any, azimuth_deg: float = 0.0,
                   sky: str = "clear") -> tuple[torch.Tensor, torch.Tensor | None]:
     """``(lighting (9, 3), sun (9, 3) or None)`` float32, camera frame: :func:`target_lighting` and
     :func:`target_sun` of a world-frame target (as :func:`target_lighting` takes it) turned first by
-    ``azimuth_deg`` about +Y (:func:`rotate_azimuth`), seen by ``world_to_camera`` (``(4, 4)`` or ``(3, 3)``)."""
+    ``azimuth_deg`` clockwise seen from above (:func:`rotate_azimuth`), seen by ``world_to_camera`` (``(4, 4)`` or
+    ``(3, 3)``)."""
     target = read_target(target)
     turned = rotate_azimuth(target, azimuth_deg) if azimuth_deg else target
     lighting = target_lighting(turned, world_to_camera, sky).float()

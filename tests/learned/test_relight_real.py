@@ -64,10 +64,10 @@ def test_02_the_targets_own_sky_is_the_crop_renderers_view(relighter) -> None:
     T = panorama.level_camera(0.0, 12.0)
     np.testing.assert_allclose(target_sky(env, K, T, 36, 48).numpy(), panorama.view(env, K, T, 36, 48, 1),
                                rtol=1e-5, atol=1e-6)
-    # Turning the target counter-clockwise by a (seen from above) is turning the camera clockwise by a:
-    # its yaw grows by a.
+    # Turning the target clockwise by a (seen from above; docs/conventions.md) is turning the camera
+    # counter-clockwise by a: its yaw falls by a.
     turned = target_sky(env, K, T, 36, 48, azimuth_deg=30.0).numpy()
-    np.testing.assert_allclose(turned, panorama.view(env, K, panorama.level_camera(30.0, 12.0), 36, 48, 1),
+    np.testing.assert_allclose(turned, panorama.view(env, K, panorama.level_camera(-30.0, 12.0), 36, 48, 1),
                                rtol=1e-5, atol=1e-6)
 
 
