@@ -174,7 +174,9 @@ def _target(env: str | None, sh_path: str | None, sun: list[float] | None, what:
         return image
     if sh_path is not None:
         return _read_sh(sh_path)
-    return sun_direction(*sun)
+    from physrelight.target_lighting import Sun
+
+    return Sun(*sun)  # the Python API's sun target: --sun ELEV AZIM is Sun(ELEV, AZIM)
 
 
 def _write_gif(path: Path, frames: list[np.ndarray], fps: float) -> None:

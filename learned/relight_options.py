@@ -149,7 +149,7 @@ class RelightRequest:
         fov_deg: the photo's horizontal field of view (its focal length, e.g. from EXIF).
         pitch_deg: the level camera's pitch; None: estimated from the sky's horizon
             (:func:`physrelight.horizon.estimate_pitch`). Ignored when ``world_to_camera`` is given.
-        source: the photo's own lighting (SH, env map, path or sun direction, world frame, the target's units),
+        source: the photo's own lighting (SH, env map, path, sun direction or ``Sun``, world frame, the target's units),
             when known (a map captured on set): the *known-source* track of ``Relighter.relight_linear``
             (quotient methods divide by it; relighting to it gives the photo back). None: the decomposition's
             estimate.

@@ -14,8 +14,8 @@ import numpy as np
 import torch
 
 from physrelight.sky_model import FIT_GLOW_EXPONENT, horizon_clamped, sun_disc
-from physrelight.target_lighting import (clear_sky_sun, overcast_level, rotate_azimuth, sky_map_kind, sun_rgb,
-                                         target_lighting, turned_camera)
+from physrelight.target_lighting import (clear_sky_sun, overcast_level, read_target, rotate_azimuth, sky_map_kind,
+                                         sun_rgb, target_lighting, turned_camera)
 
 __all__ = ["SKY_RENDERINGS", "fitted_sky", "rendered_sky", "target_sky"]
 
@@ -43,6 +43,7 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     kind = sky_map_kind(target)
     if kind == "sh":
         raise ValueError("an SH target has no sky to render: use sky source 'fit', 'gan' or 'keep'")
+    target = read_target(target)  # a Sun as its direction; a map's path read
     R = turned_camera(world_to_camera, azimuth_deg)
     if kind == "env":
         env = envmap.read(target) if isinstance(target, (str, os.PathLike)) else np.asarray(target)
