@@ -16,9 +16,11 @@ radiance and relit at a display-like level (its 99.9th-percentile luminance to 1
 back in its own units.
 
 The target lighting is given in the world frame (Y up); the camera is level and looks along
-world -Z: ``--azimuth`` turns the target about the vertical axis, ``--sun ELEV AZIM`` puts the
-sun ELEV degrees above the horizon and AZIM degrees clockwise (seen from above) from straight
-ahead of the camera (0 = the sun behind the scene, facing the camera; 180 = behind the camera).
+world -Z. ``--sun ELEV AZIM`` puts the sun ELEV degrees above the horizon and AZIM degrees
+clockwise (seen from above) from straight ahead of the camera (0 = the sun behind the scene, facing
+the camera; 90 = to its right; 180 = behind the camera); ``--azimuth T`` turns the target about the
+vertical by T degrees the same way (``--sun E A --azimuth T`` is ``--sun E A+T``; an env map's column
+j moves to j + T W / 360), as ``Relighter.relight(..., azimuth_deg=T)`` does.
 A clear sky (``--sky clear``, the default) is Mitsuba 3's Hosek-Wilkie sky for that sun (tabulated, turbidity
 3; a sun under 2 degrees gets the sky of 2 degrees) and needs ELEV > 0; ``--sky overcast`` has no sun.
 The camera's horizontal field of view comes from the photo's EXIF focal length, else ``--fov``
@@ -41,7 +43,7 @@ seen through the camera, or the sun's clear or overcast sky) in the foreground's
 with SkyGAN, ``keep`` keeps the photo's. ``--exposure auto`` (default)
 meters the relit photo as a camera would (the foreground to the photo's key, middle grey for
 a dark photo, never clipping the sky); ``keep`` keeps the camera's settings; a number adds
-stops to ``keep``. ``--sequence N`` sweeps the azimuth over 360 degrees in N frames (GIF).
+stops to ``keep``. ``--sequence N`` sweeps the azimuth clockwise over 360 degrees in N frames (GIF).
 
 ``--layers DIR`` writes ``relit``, ``sky_mask`` (white = sky), the decomposition's layers and the sun and sky read
 from the photo (``lighting.json`` and ``lighting_preview.png``, as ``physrelight lighting`` writes them). Those
@@ -173,7 +175,9 @@ def _target(env: str | None, sh_path: str | None, sun: list[float] | None, what:
         return image
     if sh_path is not None:
         return _read_sh(sh_path)
-    return sun_direction(*sun)
+    from physrelight.target_lighting import Sun
+
+    return Sun(*sun)  # the Python API's sun target: --sun ELEV AZIM is Sun(ELEV, AZIM)
 
 
 def _write_gif(path: Path, frames: list[np.ndarray], fps: float) -> None:
@@ -393,7 +397,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--exposure", type=_exposure, default="auto",
                    help="auto (meter like a camera; default), keep (same camera settings) or stops (e.g. -1)")
     p.add_argument("--azimuth", type=number_in(-SUN_AZIMUTH_LIMIT, SUN_AZIMUTH_LIMIT, "an azimuth in degrees"),
-                   default=0.0, help="turn the target about the vertical (degrees, in [-360, 360])")
+                   default=0.0, help="turn the target about the vertical, clockwise seen from above as --sun's "
+                                     "azimuth counts (degrees, in [-360, 360])")
     p.add_argument("--mask", default=None, help="sky mask PNG (white = sky), the photo's size "
                                                 "(default: the shipped sky segmenter's)")
     p.add_argument("--sky-grow", type=number_in(0.0, 1.0, "a fraction of the photo's short side"), default=GROW_REACH,

@@ -133,8 +133,9 @@ class RelightRequest:
             (:func:`learned.sky_segmentation.sky_mask_full_resolution`; when shipped, else no sky); when it finds
             none a ``UserWarning`` says why and only the foreground is relit.
         method: see ``Relighter.relight_linear`` (:data:`RELIGHT_METHODS`).
-        azimuth_deg: turn the target about the world's vertical axis first (degrees, counter-clockwise seen from
-            above; :func:`physrelight.target_lighting.rotate_azimuth`).
+        azimuth_deg: turn the target about the world's vertical axis first, in degrees clockwise seen from above,
+            as ``relight --sun``'s and ``--azimuth``'s angles count (a sun at azimuth ``a`` goes to ``a + azimuth_deg``;
+            :func:`physrelight.target_lighting.rotate_azimuth`, docs/conventions.md).
         sky: sky type of a sun-direction target (:data:`physrelight.target_lighting.SKY_TYPES`).
         new_sky: False keeps the photo's sky whatever ``sky_source`` says.
         seed: SkyGAN's noise (same seed, same sky).
@@ -142,11 +143,13 @@ class RelightRequest:
             SkyGAN is shipped, else ``"keep"``. ``"target"`` looks the target itself up through the photo's camera
             (:func:`physrelight.sky_view.target_sky`), ``"fit"`` the sky model fitted to the target's SH
             (:func:`physrelight.sky_view.fitted_sky`), both in the relit foreground's units.
-        exposure: ``"keep"``, ``"auto"`` or stops (:func:`physrelight.exposure.exposure_gain`).
+        exposure: ``"auto"`` (the default, as the command line's ``--exposure``): meter the relit photo as a camera
+            would; ``"keep"``: the photo's camera settings; or stops added to ``"keep"``
+            (:func:`physrelight.exposure.exposure_gain`).
         fov_deg: the photo's horizontal field of view (its focal length, e.g. from EXIF).
         pitch_deg: the level camera's pitch; None: estimated from the sky's horizon
             (:func:`physrelight.horizon.estimate_pitch`). Ignored when ``world_to_camera`` is given.
-        source: the photo's own lighting (SH, env map, path or sun direction, world frame, the target's units),
+        source: the photo's own lighting (SH, env map, path, sun direction or ``Sun``, world frame, the target's units),
             when known (a map captured on set): the *known-source* track of ``Relighter.relight_linear``
             (quotient methods divide by it; relighting to it gives the photo back). None: the decomposition's
             estimate.
@@ -163,7 +166,7 @@ class RelightRequest:
     new_sky: bool = True
     seed: int = 0
     sky_source: str | None = None
-    exposure: str | float = "keep"
+    exposure: str | float = "auto"
     fov_deg: float = DEFAULT_FOV_DEG
     pitch_deg: float | None = None
     source: Any = None

@@ -18,7 +18,8 @@ Images: a photo as numpy ``(H, W, 3)`` (uint8, or float display values in [0, 1]
 ``(B, 3, H, W)`` float display values; it is linearised with the sRGB curve. Results come back as the type given:
 numpy ``(H, W, C)`` or torch ``(B, C, H, W)`` (``(C, H, W)`` for an unbatched torch image). Lighting is ``(9, 3)``
 radiance SH (``(B, 9, 3)`` for a batch). Targets: SH ``(9, 3)``, an environment map (``(H, 2H, 3)`` or an EXR
-path) or a sun direction ``(3,)``, world frame (Y up), rotated into the camera with ``world_to_camera``
+path) or a sun, as a direction ``(3,)`` or as :class:`physrelight.target_lighting.Sun` ``(elevation_deg,
+azimuth_deg)`` (``relight --sun``'s angles), world frame (Y up), rotated into the camera with ``world_to_camera``
 (``(4, 4)`` or ``(3, 3)``); without it the camera is level, looking along world -Z, pitched as estimated.
 """
 
@@ -432,7 +433,8 @@ class Relighter:
     def relight_sequence(self, image: Any, target: Any, azimuths_deg: Any, world_to_camera: Any = None,
                          sky_mask: Any = None, progress: bool = False, radiance: bool = False,
                          **request: Any) -> list[Any]:
-        """:meth:`relight` for each azimuth of ``azimuths_deg`` (degrees, e.g. a turning sun), the photo
+        """:meth:`relight` for each azimuth of ``azimuths_deg`` (degrees clockwise seen from above, as
+        :class:`RelightRequest`'s ``azimuth_deg``; e.g. a turning sun), the photo
         segmented and decomposed once: the same frames as separate :meth:`relight` calls, cheaper (display
         values, or linear radiance with ``linear``; ``radiance`` as for :meth:`relight_layers`; the rest
         :class:`RelightRequest`'s but ``azimuth_deg``). ``progress`` shows a progress bar."""
@@ -468,7 +470,8 @@ class Relighter:
 
         Args:
             image: the photo (see the module doc); a single image.
-            target: SH ``(9, 3)``, env map ``(H, 2H, 3)``, EXR path or sun direction ``(3,)``, world frame.
+            target: SH ``(9, 3)``, env map ``(H, 2H, 3)``, EXR path, sun direction ``(3,)`` or
+                :class:`physrelight.target_lighting.Sun`, world frame.
             radiance: ``image`` is linear radiance (float, any scale: a render's or an HDR photo's), not display
                 values. It is relit at a display-like level
                 (:data:`physrelight.image_input.RADIANCE_WHITE_QUANTILE`; ``exposure="keep"`` keeps that level for
@@ -527,7 +530,8 @@ class Relighter:
             raise ValueError(f"sky_source must be one of {SKY_SOURCES} or None, got {req.sky_source!r}")
         parse_exposure(req.exposure)
         reuse = {} if reuse is None else reuse
-        target = read_target(target)
+        target = read_target(target)  # a map's path read, a Sun as its direction, two bare numbers refused
+        source = None if source is None else read_target(source)  # checked, like the target, before any work
         h, w = lin.shape[-2:]
         if "sky" not in reuse:
             self._stage("sky mask")

@@ -14,8 +14,8 @@ import numpy as np
 import torch
 
 from physrelight.sky_model import FIT_GLOW_EXPONENT, horizon_clamped, sun_disc
-from physrelight.target_lighting import (clear_sky_sun, overcast_level, rotate_azimuth, sky_map_kind, sun_rgb,
-                                         target_lighting, turned_camera)
+from physrelight.target_lighting import (clear_sky_sun, overcast_level, read_target, rotate_azimuth, sky_map_kind,
+                                         sun_rgb, target_lighting, turned_camera)
 
 __all__ = ["SKY_RENDERINGS", "fitted_sky", "rendered_sky", "target_sky"]
 
@@ -32,8 +32,8 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     evaluated along each ray (:func:`physrelight.sky_model.sunsky_radiance`, or the CIE overcast sky at
     :func:`physrelight.target_lighting.sun_sky_map`'s level), smooth at any resolution, plus the sun's disc for a
     clear sky (radius :data:`physrelight.sky_model.SUN_RADIUS_DEG`, luminance 1, the sun's colour).
-    ``azimuth_deg`` turns the target about +Y as :func:`physrelight.target_lighting.rotate_azimuth` does (the
-    camera is turned the other way, :func:`physrelight.target_lighting.turned_camera`).
+    ``azimuth_deg`` turns the target clockwise seen from above as :func:`physrelight.target_lighting.rotate_azimuth`
+    does (the camera is turned the other way, :func:`physrelight.target_lighting.turned_camera`).
 
     Raises:
         ValueError: an SH target (it has no sky to render).
@@ -43,6 +43,7 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     kind = sky_map_kind(target)
     if kind == "sh":
         raise ValueError("an SH target has no sky to render: use sky source 'fit', 'gan' or 'keep'")
+    target = read_target(target)  # a Sun as its direction; a map's path read
     R = turned_camera(world_to_camera, azimuth_deg)
     if kind == "env":
         env = envmap.read(target) if isinstance(target, (str, os.PathLike)) else np.asarray(target)
@@ -84,7 +85,7 @@ def rendered_sky(source: str, target: Any, K: Any, world_to_camera: Any, height:
     """``(height, width, 3)`` a relit photo's new sky rendered from its target (target units): ``source``
     ``"target"``, the target's own sky (:func:`target_sky`; an env map or a sun direction), or ``"fit"``, the sky
     model fitted to the target's world-frame SH (:func:`fitted_sky`; any target), the target turned by
-    ``azimuth_deg`` about +Y either way."""
+    ``azimuth_deg`` (clockwise seen from above, :func:`physrelight.target_lighting.rotate_azimuth`) either way."""
     if source not in SKY_RENDERINGS:
         raise ValueError(f"a rendered sky's source must be one of {SKY_RENDERINGS}, got {source!r}")
     if source == "target":

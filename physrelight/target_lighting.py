@@ -1,17 +1,24 @@
-"""The target lighting of a relighting: SH coefficients, an environment map or a sun direction, as order-2 SH in
-the camera frame, and the sun alone within it.
+"""The target lighting of a relighting: SH coefficients, an environment map or a sun, as order-2 SH in the camera
+frame, and the sun alone within it.
 
 Targets are given in the *world* frame (Y up): SH coefficients ``(9, 3)``, an environment map (array
-``(H, 2H, 3)`` or an EXR path) or a sun direction ``(3,)`` towards the sun (a sun of its elevation's colour plus a
-clear or overcast sky, :data:`SKY_TYPES`); they are rotated into the camera with ``world_to_camera`` (``(4, 4)``
-or its ``(3, 3)`` rotation; None: camera frame = world frame).
+``(H, 2H, 3)`` or an EXR path) or a sun, as a direction ``(3,)`` towards it or as its angles :class:`Sun` (a sun of
+its elevation's colour plus a clear or overcast sky, :data:`SKY_TYPES`); they are rotated into the camera with
+``world_to_camera`` (``(4, 4)`` or its ``(3, 3)`` rotation; None: camera frame = world frame).
+
+Angles about the vertical follow one convention (docs/conventions.md): an azimuth is clockwise seen from above, from
+world -Z (straight ahead of a level camera) towards +X (its right), as ``relight --sun ELEV AZIM`` counts it, and
+turning a target by ``t`` degrees (:func:`rotate_azimuth`, ``Relighter.relight(..., azimuth_deg=t)``,
+``relight --azimuth t``) adds ``t`` to every direction's azimuth.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import numbers
 import os
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,11 +27,48 @@ import torch
 from physrelight import rotations, sh
 from physrelight.image_input import as_rotation
 
-__all__ = ["SKY_TYPES", "as_lighting_batch", "camera_target", "clear_sky_sun", "overcast_level", "read_target",
-           "rotate_azimuth", "sky_map_kind", "sun_lighting", "sun_rgb", "sun_sky_map", "target_lighting", "target_sun",
-           "turned_camera"]
+__all__ = ["SKY_TYPES", "Sun", "as_lighting_batch", "azimuth_turn", "camera_target", "clear_sky_sun", "overcast_level",
+           "read_target", "rotate_azimuth", "sky_map_kind", "sun_lighting", "sun_rgb", "sun_sky_map",
+           "target_lighting", "target_sun", "turned_camera"]
 
 SKY_TYPES = ("clear", "overcast")
+
+
+@dataclass(frozen=True)
+class Sun:
+    """A sun target by its angles, as ``relight --sun ELEV AZIM`` takes them: ``Sun(10, 60)`` is a sun 10 degrees
+    above the horizon and 60 degrees clockwise seen from above from straight ahead of a level camera (world -Z;
+    90 = +X, its right; docs/conventions.md). Accepted wherever a target is (``Relighter.relight(photo, Sun(10,
+    60))``, ``source=``, :func:`target_lighting`, :func:`rotate_azimuth`, ...) as its :attr:`direction`, so with the
+    sky type of a direction (``sky="clear"`` or ``"overcast"``).
+
+    Attributes:
+        elevation_deg: degrees above the horizon, in [-90, 90] (a clear sky's sun needs > 0).
+        azimuth_deg: degrees clockwise seen from above from world -Z, any finite number.
+
+    Raises:
+        ValueError: an angle that is not a finite number, or an elevation outside [-90, 90], named.
+    """
+
+    elevation_deg: float
+    azimuth_deg: float
+
+    def __post_init__(self) -> None:
+        for name in ("elevation_deg", "azimuth_deg"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+                raise ValueError(f"Sun's {name} must be a finite number of degrees, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        if not -90.0 <= self.elevation_deg <= 90.0:
+            raise ValueError(f"Sun's elevation_deg must lie in [-90, 90] degrees, got {self.elevation_deg:g}")
+
+    @property
+    def direction(self) -> np.ndarray:
+        """``(3,)`` float64 unit world direction towards the sun (:func:`physrelight.envmap.direction_from_angles`:
+        ``(cos e sin a, sin e, -cos e cos a)``)."""
+        from physrelight.envmap import direction_from_angles
+
+        return direction_from_angles(self.elevation_deg, self.azimuth_deg)
 
 
 def as_lighting_batch(x: Any, batch: int, name: str = "lighting") -> torch.Tensor:
@@ -42,11 +86,22 @@ def as_lighting_batch(x: Any, batch: int, name: str = "lighting") -> torch.Tenso
 
 def read_target(target: Any) -> Any:
     """A target as an array: an env map's path (``str`` or ``os.PathLike``) read (:func:`physrelight.envmap.read`,
-    ``(H, 2H, 3)``), anything else as it is."""
+    ``(H, 2H, 3)``), a :class:`Sun` as its direction ``(3,)``, anything else as it is.
+
+    Raises:
+        ValueError: two numbers, which could be a sun's angles or a direction missing a component: ambiguous, so
+            refused with the two spellings that are not (``Sun(elevation_deg, azimuth_deg)``, a ``(3,)`` vector).
+    """
+    if isinstance(target, Sun):
+        return target.direction
     if isinstance(target, (str, os.PathLike)):
         from physrelight import envmap
 
         return envmap.read(target)
+    if isinstance(target, (tuple, list, np.ndarray, torch.Tensor)) and tuple(np.shape(target)) == (2,):
+        raise ValueError(f"a target of two numbers {tuple(float(x) for x in target)} is ambiguous: give a sun's "
+                         f"angles as physrelight.target_lighting.Sun(elevation_deg, azimuth_deg) (relight --sun's "
+                         f"convention) or its direction as a (3,) vector")
     return target
 
 
@@ -129,10 +184,12 @@ def sun_lighting(direction: Any, sky: str = "clear") -> np.ndarray:
 
 
 def sky_map_kind(target: Any) -> str:
-    """``"env"`` (a lat-long map ``(H, 2H, 3)`` or its path), ``"sun"`` (a direction ``(3,)``) or ``"sh"``: whether
-    a target says what its sky looks like (the first two do; SH coefficients do not)."""
+    """``"env"`` (a lat-long map ``(H, 2H, 3)`` or its path), ``"sun"`` (a direction ``(3,)`` or a :class:`Sun`)
+    or ``"sh"``: whether a target says what its sky looks like (the first two do; SH coefficients do not)."""
     if isinstance(target, (str, os.PathLike)):
         return "env"
+    if isinstance(target, Sun):
+        return "sun"
     shape = tuple(np.shape(target))
     if shape == (3,):
         return "sun"
@@ -194,12 +251,24 @@ def target_sun(target: Any, world_to_camera: Any = None, sky: str = "clear") -> 
     return None if coeffs is None else torch.as_tensor(sh.rotate(coeffs, as_rotation(world_to_camera)))
 
 
+def azimuth_turn(degrees: float) -> np.ndarray:
+    """``(3, 3)`` float64 the world rotation that turns a target by ``degrees`` about the vertical, clockwise seen
+    from above: every direction's azimuth (0 = world -Z, 90 = +X; :func:`physrelight.envmap.direction_from_angles`)
+    grows by ``degrees``. The one place the convention is built (:func:`rotate_azimuth`, :func:`turned_camera`):
+    :func:`physrelight.rotations.about_y` turns by the right-hand rule about +Y, counter-clockwise from above, so
+    this is ``about_y(-degrees)``."""
+    if not math.isfinite(float(degrees)):
+        raise ValueError(f"azimuth must be a finite number of degrees, got {degrees!r}")
+    return rotations.about_y(-float(degrees))
+
+
 def rotate_azimuth(target: Any, degrees: float) -> Any:
     """Turn a world-frame target (SH ``(9, 3)``, env map ``(H, 2H, 3)``, EXR path or sun direction ``(3,)``) by
-    ``degrees`` about +Y (the SH rotation is exact; env maps are projected first): a sun direction ``(3,)`` or
-    SH ``(9, 3)`` comes back."""
+    ``degrees`` about the vertical, clockwise seen from above (:func:`azimuth_turn`: a sun at azimuth ``a`` goes to
+    ``a + degrees``; the SH rotation is exact; env maps are projected first): a sun direction ``(3,)`` or SH
+    ``(9, 3)`` comes back."""
     target = read_target(target)
-    R = rotations.about_y(float(degrees))  # the same turn as turned_camera's, from one formula
+    R = azimuth_turn(degrees)  # the same turn as turned_camera's, from one formula
     t = np.asarray(target, dtype=np.float64) if not isinstance(target, torch.Tensor) else target.double().numpy()
     if t.shape == (3,):
         return R @ t
@@ -213,16 +282,18 @@ def rotate_azimuth(target: Any, degrees: float) -> Any:
 
 def turned_camera(world_to_camera: Any, azimuth_deg: float) -> np.ndarray:
     """``(3, 3)`` the camera rotation (of ``world_to_camera``, ``(4, 4)`` or ``(3, 3)``) that sees a target turned
-    by ``azimuth_deg`` about +Y as :func:`rotate_azimuth` turns it:
-    ``target'(w) = target(R_y^T w)``, so ``R = T R_y``."""
-    return np.asarray(world_to_camera, dtype=np.float64)[:3, :3] @ rotations.about_y(float(azimuth_deg))
+    by ``azimuth_deg`` as :func:`rotate_azimuth` turns it (clockwise seen from above):
+    ``target'(w) = target(R_t^T w)`` with ``R_t = azimuth_turn(azimuth_deg)``, so ``R = T R_t`` (the camera turned
+    the other way)."""
+    return np.asarray(world_to_camera, dtype=np.float64)[:3, :3] @ azimuth_turn(azimuth_deg)
 
 
 def camera_target(target: Any, world_to_camera: Any, azimuth_deg: float = 0.0,
                   sky: str = "clear") -> tuple[torch.Tensor, torch.Tensor | None]:
     """``(lighting (9, 3), sun (9, 3) or None)`` float32, camera frame: :func:`target_lighting` and
     :func:`target_sun` of a world-frame target (as :func:`target_lighting` takes it) turned first by
-    ``azimuth_deg`` about +Y (:func:`rotate_azimuth`), seen by ``world_to_camera`` (``(4, 4)`` or ``(3, 3)``)."""
+    ``azimuth_deg`` clockwise seen from above (:func:`rotate_azimuth`), seen by ``world_to_camera`` (``(4, 4)`` or
+    ``(3, 3)``)."""
     target = read_target(target)
     turned = rotate_azimuth(target, azimuth_deg) if azimuth_deg else target
     lighting = target_lighting(turned, world_to_camera, sky).float()

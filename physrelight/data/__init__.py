@@ -1,4 +1,4 @@
-"""The data files that ship with :mod:`physrelight`: the HDR panoramas and their sky masks.
+"""The data files that ship with :mod:`physrelight`: the HDR panoramas and their sky masks, and one example photo.
 
 ``physrelight/data/hdri/NAME.exr`` are lat-long environment maps in the layout of DESIGN.md (row 0 = zenith),
 ``NAME_sky.png`` their sky masks; ``hdri_heldout/`` holds maps never used in training; ``hdri_more/`` the fifteen
@@ -15,6 +15,9 @@ the path by hand::
 
 ``studio`` and the ``indoor`` maps of ``hdri_more`` are indoor: stress cases and no-sky negatives, never an
 outdoor score (DESIGN.md). ``pm_bridge`` is a ``walkway`` (a covered glass walkway): neither.
+
+``photos/rocket.jpg`` is a real outdoor photo to try things on (public domain; ``photos/LICENSE.txt``):
+:func:`example_photo` gives its path.
 """
 
 from __future__ import annotations
@@ -23,8 +26,8 @@ import json
 from functools import lru_cache
 from pathlib import Path
 
-__all__ = ["COLLECTIONS", "DATA_DIR", "HDRI_DIR", "HELDOUT_DIR", "KINDS", "MORE_DIR", "hdri", "hdri_kind",
-           "hdri_names", "hdri_sky_mask"]
+__all__ = ["COLLECTIONS", "DATA_DIR", "HDRI_DIR", "HELDOUT_DIR", "KINDS", "MORE_DIR", "PHOTO_DIR", "example_photo",
+           "hdri", "hdri_kind", "hdri_names", "hdri_sky_mask"]
 
 DATA_DIR = Path(__file__).resolve().parent
 """The package's data folder."""
@@ -40,6 +43,8 @@ KINDS = ("outdoor", "indoor", "walkway")
 """What a map shows: an outdoor place with sky, a room (no sky), or a covered walkway (neither)."""
 _SHIPPED_INDOOR = ("studio",)
 _FOLDERS = {"shipped": HDRI_DIR, "heldout": HELDOUT_DIR, "more": MORE_DIR}
+PHOTO_DIR = DATA_DIR / "photos"
+"""The example photo and its licence note."""
 
 
 def _collection(heldout: bool, collection: str | None) -> str:
@@ -105,3 +110,10 @@ def hdri_sky_mask(name: str, heldout: bool = False, collection: str | None = Non
     none (an outdoor map of ``hdri_more`` whose mask could not be made trustworthy; rooms have none)."""
     p = hdri(name, heldout, collection).with_name(f"{name}_sky.png")
     return p if p.is_file() else None
+
+
+def example_photo() -> Path:
+    """The path of the shipped example photo: ``photos/rocket.jpg``, a 640 x 427 sRGB JPEG of a rocket on its pad
+    at dusk, under a deep-blue sky (SpaceX, public domain; scikit-image's ``rocket.jpg``, byte for byte), for
+    ``physrelight.io.read_image`` or ``physrelight relight``."""
+    return PHOTO_DIR / "rocket.jpg"

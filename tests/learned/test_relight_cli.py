@@ -33,18 +33,19 @@ def test_01_sun_direction_and_azimuth_follow_the_documented_frame() -> None:
     np.testing.assert_allclose(sun_direction(0, 0), [0, 0, -1], atol=1e-12)  # ahead of the camera
     np.testing.assert_allclose(sun_direction(0, 90), [1, 0, 0], atol=1e-12)  # to its right
     np.testing.assert_allclose(sun_direction(90, 33), [0, 1, 0], atol=1e-12)
-    # Turning a sun target by 90 deg about +Y (counter-clockwise from above) = the sun moved there.
-    d = sun_direction(30, 0)
-    np.testing.assert_allclose(rotate_azimuth(d, 90), sun_direction(30, -90), atol=1e-12)
+    # One convention (docs/conventions.md): a turn by t is clockwise seen from above, as --sun's azimuth counts, so
+    # a sun at azimuth a turned by t is the sun at a + t (ahead turned by 90 goes to the right).
+    np.testing.assert_allclose(rotate_azimuth(sun_direction(30, 0), 90), sun_direction(30, 90), atol=1e-12)
+    np.testing.assert_allclose(rotate_azimuth(sun_direction(30, 40), 20), sun_direction(30, 60), atol=1e-12)
+    np.testing.assert_allclose(rotate_azimuth(sun_direction(30, 40), -130), sun_direction(30, -90), atol=1e-12)
     # On SH the turn is the exact SH rotation: same as lighting the turned sun.
-    np.testing.assert_allclose(rotate_azimuth(sun_lighting(d), 90), sun_lighting(sun_direction(30, -90)), atol=1e-9)
-    # An env map turned by whole columns: projection of the shifted map.
+    d = sun_direction(30, 0)
+    np.testing.assert_allclose(rotate_azimuth(sun_lighting(d), 90), sun_lighting(sun_direction(30, 90)), atol=1e-9)
+    # An env map turned by whole columns: its column j moves to j + 8 (u = azimuth / 360 grows), built by hand.
     env = envmap.read(FOREST)
     h, w = env.shape[:2]
-    a = np.radians(360.0 * 8 / w)
-    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-    np.testing.assert_allclose(rotate_azimuth(env, math.degrees(a)),
-                               sh.project_envmap(envmap.rotate(env, R), order=2), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(rotate_azimuth(env, 360.0 * 8 / w), sh.project_envmap(np.roll(env, 8, axis=1), order=2),
+                               rtol=1e-5, atol=1e-6)
 
 
 def test_02_relight_writes_full_resolution_output_and_layers(photo: Path, tmp_path: Path) -> None:
@@ -241,11 +242,11 @@ def test_08_a_radiance_photo_is_relit_in_its_own_units(photo: Path, tmp_path: Pa
     display = io.read_image(photo)
     linear = colour.from_ldr(torch.from_numpy(display)).numpy()
     # to float rounding (the two decodings run on differently laid-out arrays)
-    np.testing.assert_allclose(relighter.relight(linear, str(FOREST), radiance=True),
-                               relighter.relight(display, str(FOREST)), atol=1e-5)
+    np.testing.assert_allclose(relighter.relight(linear, str(FOREST), radiance=True, exposure="keep"),
+                               relighter.relight(display, str(FOREST), exposure="keep"), atol=1e-5)
     hdr = linear * 40.0  # its 99.9th-percentile luminance well above 1
-    one = relighter.relight(hdr, str(FOREST), radiance=True, linear=True)
-    ten = relighter.relight(hdr * 10.0, str(FOREST), radiance=True, linear=True)
+    one = relighter.relight(hdr, str(FOREST), radiance=True, linear=True, exposure="keep")
+    ten = relighter.relight(hdr * 10.0, str(FOREST), radiance=True, linear=True, exposure="keep")
     np.testing.assert_allclose(ten, 10.0 * one, rtol=1e-4, atol=1e-6)
     same = relighter.relight(hdr, str(FOREST), source=str(FOREST), method="quotient", new_sky=False,
                              exposure="keep", radiance=True, linear=True)
@@ -386,3 +387,31 @@ def test_12_source_env_is_the_source_and_env_the_target(photo: Path, tmp_path: P
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)
     photo_linear = colour.from_ldr(torch.from_numpy(image)).numpy()
     assert np.abs(got - photo_linear).mean() > 0.01
+
+
+def test_14_azimuth_turns_the_target_the_way_suns_azimuth_counts(photo: Path, tmp_path: Path) -> None:
+    """One convention on the command line: ``--sun 30 40 --azimuth 20`` is ``--sun 30 60`` (clockwise seen from
+    above; issue 41), not ``--sun 30 20`` (the counter-clockwise turn ``--azimuth`` made before), sky included."""
+    def run(name: str, *args: str) -> np.ndarray:
+        out = tmp_path / f"{name}.png"
+        assert main(["relight", str(photo), *args, "--quiet", "--threads", "1", "-o", str(out)]) == 0
+        return io.read_image(out)
+
+    turned = run("turned", "--sun", "30", "40", "--azimuth", "20")
+    assert np.abs(turned - run("at60", "--sun", "30", "60")).max() <= 1.0 / 255 + 1e-6
+    assert np.abs(turned - run("at20", "--sun", "30", "20")).mean() > 5e-3
+
+
+def test_13_the_apis_defaults_are_the_command_lines(photo: Path, tmp_path: Path) -> None:
+    """The same call gives the same picture: ``Relighter.relight(photo, target)`` at its defaults is what
+    ``physrelight relight photo --env MAP`` writes at its own (the automatic exposure included; issue 41), to 8-bit
+    rounding, and the camera's own settings (``exposure="keep"``) give another picture."""
+    from learned import Relighter
+
+    out = tmp_path / "relit.png"
+    assert main(["relight", str(photo), "--env", str(FOREST), "--quiet", "--threads", "1", "-o", str(out)]) == 0
+    relighter = Relighter.load()
+    api = relighter.relight(io.read_image(photo), str(FOREST))
+    assert np.abs(io.read_image(out) - api).max() <= 0.5 / 255 + 1e-4
+    keep = relighter.relight(io.read_image(photo), str(FOREST), exposure="keep")
+    assert np.abs(keep - api).mean() > 0.01

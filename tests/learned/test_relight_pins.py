@@ -36,10 +36,11 @@ FOREST = ROOT / "physrelight" / "data" / "hdri" / "forest.exr"
 REFERENCE = Path(__file__).with_name("data") / "relight_reference.npz"
 
 # The fixed input of the stored reference: a sun 35 deg up, 40 deg right of straight ahead (CLI convention),
-# world_to_camera = Rx(-10 deg) Ry(25 deg), the target turned by 30 deg about the vertical.
+# world_to_camera = Rx(-10 deg) Ry(25 deg), the target turned by 30 deg counter-clockwise seen from above: azimuth_deg
+# -30 since issue 41 made the azimuth clockwise (+30 before; the stored reference is the same).
 REF_SUN = (35.0, 40.0)
-REF_YAW, REF_PITCH, REF_AZIMUTH = 25.0, -10.0, 30.0
-# What `physrelight relight` passes that the Python API does not default to (its --method and --exposure).
+REF_YAW, REF_PITCH, REF_AZIMUTH = 25.0, -10.0, -30.0
+# The command line's --method and --exposure defaults (the Python API's own too since issue 41).
 CLI_DEFAULTS = dict(method="proposed", exposure="auto")
 
 
@@ -96,8 +97,9 @@ def _reference_layers(relighter, photo: np.ndarray) -> dict[str, np.ndarray]:
     sun shaded by its exact cosine), and ``relit_auto``, ``relight`` at the command line's defaults
     (:data:`CLI_DEFAULTS`: the automatic exposure)."""
     kw = dict(world_to_camera=_world_to_camera(REF_YAW, REF_PITCH), azimuth_deg=REF_AZIMUTH, seed=0)
-    out = relighter.relight_layers(photo, _sun(*REF_SUN), method="proposed", **kw)
-    out["relit_quotient"] = relighter.relight_layers(photo, _sun(*REF_SUN), method="quotient", **kw)["relit"]
+    out = relighter.relight_layers(photo, _sun(*REF_SUN), method="proposed", exposure="keep", **kw)
+    out["relit_quotient"] = relighter.relight_layers(photo, _sun(*REF_SUN), method="quotient", exposure="keep",
+                                                  **kw)["relit"]
     out["relit_auto"] = relighter.relight(photo, _sun(*REF_SUN), **CLI_DEFAULTS, **kw)
     return out
 
@@ -176,41 +178,43 @@ def test_01_relight_with_an_azimuth_is_relight_of_the_target_turned_by_rotate_az
     target = targets[kind]
     if kind == "env":
         # A map keeps its own sun under an azimuth (rotate_azimuth would project it to SH): compare with the
-        # map turned by hand, 25 columns (a turn by a moves column j + a W / 360 to column j, test 02).
+        # map turned by hand, 25 columns (a turn by a moves column j to column j + a W / 360, test 02).
         k = 25
         a = 360.0 * k / target.shape[1]
-        turned = relighter.relight(photo, target, azimuth_deg=a, sky_mask=sky, seed=1)[fg]
-        np.testing.assert_allclose(turned, relighter.relight(photo, np.roll(target, -k, axis=1), sky_mask=sky,
-                                                             seed=1)[fg], atol=1e-5)
-        assert _mean_diff(turned, relighter.relight(photo, np.roll(target, k, axis=1), sky_mask=sky,
-                                                    seed=1)[fg]) > 0.02
+        turned = relighter.relight(photo, target, azimuth_deg=a, sky_mask=sky, seed=1, exposure="keep")[fg]
+        np.testing.assert_allclose(turned, relighter.relight(photo, np.roll(target, k, axis=1), sky_mask=sky,
+                                                             seed=1, exposure="keep")[fg], atol=1e-5)
+        assert _mean_diff(turned, relighter.relight(photo, np.roll(target, -k, axis=1), sky_mask=sky,
+                                                    seed=1, exposure="keep")[fg]) > 0.02
         return
-    turned = relighter.relight(photo, target, azimuth_deg=70.0, sky_mask=sky, seed=1)[fg]
+    turned = relighter.relight(photo, target, azimuth_deg=70.0, sky_mask=sky, seed=1, exposure="keep")[fg]
     np.testing.assert_allclose(turned, relighter.relight(photo, rotate_azimuth(target, 70.0), sky_mask=sky,
-                                                         seed=1)[fg], atol=1e-5)
+                                                         seed=1, exposure="keep")[fg], atol=1e-5)
     # The other way round is a different picture: the test can tell the sign.
     assert _mean_diff(turned, relighter.relight(photo, rotate_azimuth(target, -70.0), sky_mask=sky,
-                                                seed=1)[fg]) > 0.02
+                                                seed=1, exposure="keep")[fg]) > 0.02
 
 
-def test_02_the_azimuth_turns_the_target_counter_clockwise_seen_from_above(relighter, photo, env) -> None:
-    # Built by hand, without rotate_azimuth: a turn by a about +Y moves env column j + a W / 360 to
-    # column j (u = atan2(x, -z) / 2pi grows by a / 360), and moves a sun straight ahead (-Z) to the
-    # left (-X) for a = 90.
+def test_02_the_azimuth_turns_the_target_clockwise_seen_from_above(relighter, photo, env) -> None:
+    # Built by hand, without rotate_azimuth: a turn by a moves env column j to column j + a W / 360 (every
+    # direction's azimuth, u = atan2(x, -z) / 2pi, grows by a / 360), and moves a sun straight ahead (-Z) to the
+    # right (+X) for a = 90, as relight --sun's azimuth counts (one convention since issue 41; the turn was
+    # counter-clockwise before).
     w = env.shape[1]
     k = 16
     a = 360.0 * k / w
-    by_hand = np.roll(env, -k, axis=1)
-    np.testing.assert_allclose(relighter.relight(photo, env, azimuth_deg=a, method="lambertian_sh", new_sky=False),
-                               relighter.relight(photo, by_hand, method="lambertian_sh", new_sky=False), atol=2e-5)
-    kw = dict(method="shadownet_lambertian")
+    by_hand = np.roll(env, k, axis=1)
+    kw = dict(method="lambertian_sh", new_sky=False, exposure="keep")
+    np.testing.assert_allclose(relighter.relight(photo, env, azimuth_deg=a, **kw),
+                               relighter.relight(photo, by_hand, **kw), atol=2e-5)
+    kw = dict(method="shadownet_lambertian", exposure="keep")
     ahead = np.array([0.0, 0.5, -math.sqrt(0.75)])
     left, right = np.array([-math.sqrt(0.75), 0.5, 0.0]), np.array([math.sqrt(0.75), 0.5, 0.0])
     turned = relighter.relight(photo, ahead, azimuth_deg=90.0, **kw)
-    np.testing.assert_allclose(turned, relighter.relight(photo, left, **kw), atol=2e-5)
-    # A turn the wrong way gives the right-hand sun: a difference of 0. (0.0209 with the "network" lighting
+    np.testing.assert_allclose(turned, relighter.relight(photo, right, **kw), atol=2e-5)
+    # A turn the wrong way gives the left-hand sun: a difference of 0. (0.0209 with the "network" lighting
     # step, 0.0170 with "source_map", whose lighting leaves this photo 15 % darker: issue 26.)
-    assert _mean_diff(turned, relighter.relight(photo, right, **kw)) > 0.01
+    assert _mean_diff(turned, relighter.relight(photo, left, **kw)) > 0.01
 
 
 # ----------------------------------------------------------------------------- world_to_camera
@@ -240,7 +244,7 @@ def test_03_world_to_camera_rotates_the_target_into_the_camera_not_out_of_it(rel
 
 def test_04_relight_through_a_turned_camera_is_relight_of_the_env_map_turned_by_hand(relighter, photo, env) -> None:
     R = _world_to_camera(50.0, 20.0)
-    kw = dict(method="shadownet_lambertian", new_sky=False)
+    kw = dict(method="shadownet_lambertian", new_sky=False, exposure="keep")
     posed = relighter.relight(photo, env, world_to_camera=R, **kw)
     by_hand = relighter.relight(photo, envmap.rotate(env, R), world_to_camera=np.eye(3), **kw)
     assert np.abs(posed - by_hand).max() < 0.03 and _mean_diff(posed, by_hand) < 0.003
@@ -301,7 +305,7 @@ def test_06_cli_sequence_steps_the_azimuth_by_360_over_n_from_the_given_azimuth(
 
     monkeypatch.setattr(Relighter, "relight_sequence", spy)
     out = tmp_path / "seq.gif"
-    kw = dict(method="shadownet_lambertian", new_sky=False)
+    kw = dict(method="shadownet_lambertian", new_sky=False, exposure="keep")
     assert main(["relight", str(photo_png), "--sun", "30", "40", "--azimuth", "10", "--sequence", "3", "--keep-sky",
                  "--method", kw["method"], "--exposure", "keep", "--quiet", "-o", str(out), "--threads", "1"]) == 0
     np.testing.assert_allclose(np.concatenate(seen), [10.0, 130.0, 250.0], atol=1e-9)

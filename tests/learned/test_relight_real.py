@@ -64,10 +64,10 @@ def test_02_the_targets_own_sky_is_the_crop_renderers_view(relighter) -> None:
     T = panorama.level_camera(0.0, 12.0)
     np.testing.assert_allclose(target_sky(env, K, T, 36, 48).numpy(), panorama.view(env, K, T, 36, 48, 1),
                                rtol=1e-5, atol=1e-6)
-    # Turning the target counter-clockwise by a (seen from above) is turning the camera clockwise by a:
-    # its yaw grows by a.
+    # Turning the target clockwise by a (seen from above; docs/conventions.md) is turning the camera
+    # counter-clockwise by a: its yaw falls by a.
     turned = target_sky(env, K, T, 36, 48, azimuth_deg=30.0).numpy()
-    np.testing.assert_allclose(turned, panorama.view(env, K, panorama.level_camera(30.0, 12.0), 36, 48, 1),
+    np.testing.assert_allclose(turned, panorama.view(env, K, panorama.level_camera(-30.0, 12.0), 36, 48, 1),
                                rtol=1e-5, atol=1e-6)
 
 
@@ -87,7 +87,8 @@ def test_03_relight_paints_the_target_sky_in_the_foregrounds_units(relighter) ->
     sky = np.zeros(photo.shape[:2], bool)
     sky[:20] = True
     T = panorama.level_camera(0.0, 5.0)
-    out = relighter.relight(photo, env, world_to_camera=T, sky_mask=sky, method="quotient", fov_deg=60.0)
+    out = relighter.relight(photo, env, world_to_camera=T, sky_mask=sky, method="quotient", fov_deg=60.0,
+                          exposure="keep")
     lin = colour.from_ldr(torch.from_numpy(photo).permute(2, 0, 1)[None].float() / 255)
     target_cam = target_lighting(env, T).float()
     work = relighter.relight_full_resolution(lin, torch.from_numpy(sky)[None, None], target_cam,
@@ -398,8 +399,9 @@ def test_10b_an_sh_targets_default_sky_is_skygan_smoothed(relighter) -> None:
     photo = skimage.data.rocket()[::2, ::2]
     sky, _ = Relighter.photo_sky(relighter, colour.from_ldr(torch.from_numpy(photo).permute(2, 0, 1)[None].float() / 255))
     m = sky[0, 0].numpy()
-    default = relighter.relight(photo, coeffs, sky_mask=m, method="quotient").astype(float)
-    raw_gan = relighter.relight(photo, coeffs, sky_mask=m, method="quotient", sky_source="gan").astype(float)
+    default = relighter.relight(photo, coeffs, sky_mask=m, method="quotient", exposure="keep").astype(float)
+    raw_gan = relighter.relight(photo, coeffs, sky_mask=m, method="quotient", sky_source="gan",
+                                exposure="keep").astype(float)
     assert np.array_equal(default, raw_gan)  # "gan" is the smoothed sky too
 
     def roughness(img: np.ndarray) -> float:

@@ -285,9 +285,34 @@ def test_13_the_tuning_is_one_frozen_set_of_options_given_at_construction(religh
     assert other.options == RelightOptions(denoise=DENOISE, sky_grow=0.0) and relighter.options == RelightOptions()
     with pytest.raises(AttributeError):
         other.options.denoise = None  # frozen
-    assert RelightRequest().method == "proposed" and RelightRequest().exposure == "keep"
+    assert RelightRequest().method == "proposed" and RelightRequest().exposure == "auto"  # the command line's
     image, sky = photo
     with pytest.raises(TypeError, match="azimuth"):
         relighter.relight(image[:1], _target(3), sky_mask=sky[:1, 0], azimuth=30.0)
     with pytest.raises(TypeError, match="azimuths_deg"):
         relighter.relight_sequence(image[:1], _target(3), [0.0], sky_mask=sky[:1, 0], azimuth_deg=30.0)
+
+
+def test_14_a_sun_by_its_angles_is_relight_suns_target_wherever_a_target_goes(relighter) -> None:
+    """``Sun(elevation_deg, azimuth_deg)`` (issue 41) relights as its direction does, as the target, under a turn,
+    in a sequence and as the known source; two bare numbers are refused as ambiguous, before any work."""
+    from learned.relight_cli import sun_direction
+    from physrelight.target_lighting import Sun
+
+    rng = np.random.default_rng(14)
+    photo = (rng.uniform(0.1, 0.9, (40, 60, 3)) * 255).astype(np.uint8)
+    photo[:10] = (110, 160, 230)
+    kw = dict(seed=2, pitch_deg=5.0)
+    by_angles = relighter.relight(photo, Sun(20, 120), azimuth_deg=30.0, **kw)
+    np.testing.assert_array_equal(by_angles, relighter.relight(photo, sun_direction(20, 120), azimuth_deg=30.0, **kw))
+    np.testing.assert_allclose(by_angles, relighter.relight(photo, Sun(20, 150), **kw), atol=1e-5)  # 120 + 30
+    frames = relighter.relight_sequence(photo, Sun(20, 120), [0.0, 30.0], **kw)
+    np.testing.assert_allclose(frames[1], by_angles, atol=1e-6)
+    known = relighter.relight(photo, Sun(40, -20), source=Sun(60, 10), method="quotient", **kw)
+    np.testing.assert_array_equal(known, relighter.relight(photo, sun_direction(40, -20), source=sun_direction(60, 10),
+                                                           method="quotient", **kw))
+    for bad in ((20, 120), [20.0, 120.0], np.array([20.0, 120.0])):
+        with pytest.raises(ValueError, match="ambiguous"):
+            relighter.relight(photo, bad)
+    with pytest.raises(ValueError, match="ambiguous"):
+        relighter.relight(photo, Sun(20, 120), source=(60, 10), method="quotient")

@@ -108,3 +108,27 @@ def test_07_the_more_masks_are_what_their_script_writes() -> None:
             assert path is None, name
             continue
         np.testing.assert_array_equal(read_sky_mask(path, want.shape), want, err_msg=name)
+
+
+def test_08_the_example_photo_is_scikit_images_public_domain_rocket_and_package_data() -> None:
+    """``example_photo()`` is a real outdoor photo with a sky, shipped byte for byte as its licence note says
+    (scikit-image's ``rocket.jpg``, sha256 in ``photos/LICENSE.txt``), readable by the photo reader, and carried
+    by the package data."""
+    import hashlib
+    import tomllib
+
+    from physrelight import io
+
+    p = data.example_photo()
+    assert p == data.PHOTO_DIR / "rocket.jpg" and p.is_file()
+    note = (data.PHOTO_DIR / "LICENSE.txt").read_text()
+    assert "public domain" in note and hashlib.sha256(p.read_bytes()).hexdigest() in note
+    photo = io.read_photo(p)
+    assert photo.image.shape == (427, 640, 3) and not photo.radiance and not photo.notes
+    assert photo.image[:40].mean(axis=(0, 1))[2] > photo.image[:40].mean(axis=(0, 1))[0] + 0.1  # a blue sky on top
+    skimage = pytest.importorskip("skimage")
+    assert p.read_bytes() == (Path(skimage.__file__).parent / "data" / "rocket.jpg").read_bytes()
+    root = Path(__file__).resolve().parents[2]
+    globs = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]["physrelight"]
+    shipped = {q for g in globs for q in (root / "physrelight").glob(g) if q.is_file()}
+    assert p in shipped and data.PHOTO_DIR / "LICENSE.txt" in shipped

@@ -55,3 +55,45 @@ def test_03_a_lighting_batch_is_checked_at_the_door() -> None:
         as_lighting_batch(torch.rand(3, 9, 3), 2, "target")
     with pytest.raises(ValueError, match="source holds NaN"):
         as_lighting_batch(torch.full((9, 3), float("nan")), 1, "source")
+
+
+def test_04_a_sun_by_its_angles_is_the_sun_direction_of_relight_sun() -> None:
+    """``Sun(elevation_deg, azimuth_deg)`` is the target ``relight --sun ELEV AZIM`` names (issue 41): azimuth
+    clockwise seen from above from straight ahead (world -Z), 90 = +X; every reader of targets takes it as that
+    direction."""
+    from physrelight.target_lighting import Sun, read_target, rotate_azimuth, sky_map_kind
+
+    np.testing.assert_allclose(Sun(0, 0).direction, [0, 0, -1], atol=1e-12)  # straight ahead
+    np.testing.assert_allclose(Sun(0, 90).direction, [1, 0, 0], atol=1e-12)  # to the right
+    np.testing.assert_allclose(Sun(90, 33).direction, [0, 1, 0], atol=1e-12)
+    e, a = np.radians(10.0), np.radians(60.0)  # by hand: (cos e sin a, sin e, -cos e cos a)
+    by_hand = np.array([np.cos(e) * np.sin(a), np.sin(e), -np.cos(e) * np.cos(a)])
+    sun = Sun(10, 60)
+    np.testing.assert_allclose(read_target(sun), by_hand, atol=1e-12)
+    assert sky_map_kind(sun) == "sun"
+    T = rotations.axis_angle([1.0, 0.0, 0.0], -12.0) @ rotations.about_y(40.0)  # a pitched, turned camera
+    for sky in ("clear", "overcast"):
+        np.testing.assert_array_equal(target_lighting(sun, T, sky).numpy(), target_lighting(by_hand, T, sky).numpy())
+    np.testing.assert_array_equal(target_sun(sun, T).numpy(), target_sun(by_hand, T).numpy())
+    for got, want in zip(camera_target(sun, T, 25.0), camera_target(by_hand, T, 25.0)):
+        np.testing.assert_array_equal(got.numpy(), want.numpy())
+    np.testing.assert_allclose(rotate_azimuth(sun, 30.0), Sun(10, 90).direction, atol=1e-12)  # clockwise turn
+    assert Sun(np.float32(10), np.int64(60)) == Sun(10.0, 60.0)  # numpy scalars are numbers too
+
+
+@pytest.mark.parametrize("bad, match", [
+    (lambda S: S(95.0, 10.0), r"elevation_deg must lie in \[-90, 90\]"),
+    (lambda S: S(float("nan"), 10.0), "elevation_deg must be a finite number"),
+    (lambda S: S(10.0, float("inf")), "azimuth_deg must be a finite number"),
+    (lambda S: S("10", 60.0), "elevation_deg must be a finite number"),
+    (lambda S: S(True, 60.0), "elevation_deg must be a finite number"),
+    (lambda S: target_lighting(S(-5.0, 60.0)), "a clear sky's sun must be above the horizon"),
+    (lambda S: target_lighting((10.0, 60.0)), r"two numbers .* ambiguous.*Sun\(elevation_deg, azimuth_deg\)"),
+    (lambda S: target_lighting(np.array([10.0, 60.0])), "ambiguous"),
+    (lambda S: camera_target(torch.tensor([10.0, 60.0]), np.eye(3)), "ambiguous"),
+])
+def test_05_a_bad_or_ambiguous_sun_is_refused_by_name(bad, match: str) -> None:
+    from physrelight.target_lighting import Sun
+
+    with pytest.raises(ValueError, match=match):
+        bad(Sun)
