@@ -40,14 +40,6 @@ __all__ = ["BAND_WORKING_PIXELS", "CLOUD_SKY", "DUSK_SKY", "SEGMENT_RES", "WIDE_
 _LUMA = colour.LUMINANCE
 
 
-def _check_image(image: torch.Tensor, name: str = "image") -> None:
-    if not isinstance(image, torch.Tensor) or image.ndim != 4 or image.shape[1] != 3:
-        got = tuple(image.shape) if isinstance(image, torch.Tensor) else type(image).__name__
-        raise ValueError(f"{name} must be a tensor of shape (B, 3, H, W), got {got}")
-    if image.shape[-1] < 1 or image.shape[-2] < 1:
-        raise ValueError(f"{name} must be non-empty, got {tuple(image.shape)}")
-
-
 class SkySegmenter(nn.Module):
     """Linear image ``(B, 3, H, W)`` -> sky logits ``(B, 1, H, W)``.
 
@@ -66,7 +58,7 @@ class SkySegmenter(nn.Module):
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         """``(B, 3, H, W)`` linear -> ``(B, 1, H, W)`` logits (sky > 0)."""
-        _check_image(image)
+        sky_mask.check_rgb_batch(image)
         x = torch.log(image.clamp_min(0) + 1e-3)
         lum = torch.log((image.clamp_min(0) * image.new_tensor(_LUMA).reshape(1, 3, 1, 1)).sum(1, keepdim=True) + 1e-3)
         # Exposure invariance: subtract the image's mean log luminance.
@@ -75,7 +67,7 @@ class SkySegmenter(nn.Module):
 
 def sky_probability(model: SkySegmenter, image: torch.Tensor) -> torch.Tensor:
     """``(B, 3, H, W)`` linear, any size -> sky probability ``(B, 1, H, W)``, computed at the model's resolution."""
-    _check_image(image)
+    sky_mask.check_rgb_batch(image)
     h, w = image.shape[-2:]
     param = next(model.parameters())
     x = resize_short_side(image.to(param.dtype), model.res)
@@ -171,7 +163,7 @@ def photometric_augment(image: torch.Tensor, generator: torch.Generator, wide: b
     Returns:
         ``(B, 3, H, W)`` linear RGB.
     """
-    _check_image(image)
+    sky_mask.check_rgb_batch(image)
     out = []
     g = generator
 
@@ -204,7 +196,7 @@ def photometric_augment(image: torch.Tensor, generator: torch.Generator, wide: b
 
 def _check_image_and_sky(image: torch.Tensor, sky: torch.Tensor) -> None:
     """``image (B, 3, H, W)`` and its sky ``(B, 1, H, W)`` bool, or a ValueError naming the bad one."""
-    _check_image(image)
+    sky_mask.check_rgb_batch(image)
     if sky.shape != (image.shape[0], 1, *image.shape[-2:]) or sky.dtype != torch.bool:
         raise ValueError(f"sky must be a bool tensor of shape {(image.shape[0], 1, *image.shape[-2:])}, got "
                          f"{sky.dtype} {tuple(sky.shape)}")
@@ -369,7 +361,7 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor,
     """
     from physrelight.guided_filter import guided_upsample
 
-    _check_image(image)
+    sky_mask.check_rgb_batch(image)
     sizes = (res,) if res is None or not isinstance(res, tuple) else res
     if not sizes or any(r is not None and (isinstance(r, bool) or not isinstance(r, int) or r < 8) for r in sizes) \
             or (len(sizes) > 1 and None in sizes):

@@ -25,13 +25,14 @@ from physrelight import colour
 __all__ = ["COLOUR_MIN_BLUE_OVER_RED", "GROW_CHI2", "GROW_ERODE", "GROW_MAX_SPREAD", "GROW_REACH", "MIN_SKY_FRACTION",
            "MIN_SURE_SHARE", "MONOCHROME_MAX_SHARE", "MONOCHROME_TOLERANCE", "REFINEMENT", "REFINEMENTS",
            "SMOOTHNESS_MAX_RATIO", "SMOOTHNESS_NOISE_AT_OWN_SIZE", "SMOOTHNESS_NOISE_AWARE", "VARIANCE_FLOOR",
-           "display_noise_sigma", "grow_sky_by_colour", "is_monochrome", "label_components", "log_noise_sigma",
+           "check_rgb_batch", "display_noise_sigma", "grow_sky_by_colour", "is_monochrome", "label_components", "log_noise_sigma",
            "plausible_sky", "refine_sky_boundary", "resized_noise_roughness", "sky_colour_model", "sky_roughness"]
 
 _LUMA = colour.LUMINANCE
 
 
-def _check_image(image: torch.Tensor, name: str = "image") -> None:
+def check_rgb_batch(image: torch.Tensor, name: str = "image") -> None:
+    """Refuse anything but a non-empty ``(B, 3, H, W)`` tensor with a ``ValueError`` naming ``name``."""
     if not isinstance(image, torch.Tensor) or image.ndim != 4 or image.shape[1] != 3:
         got = tuple(image.shape) if isinstance(image, torch.Tensor) else type(image).__name__
         raise ValueError(f"{name} must be a tensor of shape (B, 3, H, W), got {got}")
@@ -85,7 +86,7 @@ def is_monochrome(image: torch.Tensor) -> bool:
     :meth:`learned.relighter.Relighter.relight_layers` says so in a warning. A tinted monochrome (sepia) has
     colour by this test.
     """
-    _check_image(image)
+    check_rgb_batch(image)
     d = colour.to_ldr(image[0].clamp_min(0.0))
     spread = d.amax(0) - d.amin(0)
     return float((spread > MONOCHROME_TOLERANCE).float().mean()) <= MONOCHROME_MAX_SHARE

@@ -93,7 +93,7 @@ MUTATIONS: tuple[Mutation, ...] = (
              ">= 0.5 * ref_lum and", ">= 0.25 * ref_lum and",
              (f"{T_MASK}::test_13_sky_between_towers_is_kept_when_half_as_bright_and_as_blue",)),
     Mutation("13 relight CLI: --pitch ignored", "learned/relight_cli.py",
-             "pitch_deg=args.pitch,", "pitch_deg=None,",
+             "else DEFAULT_FOV_DEG, pitch_deg=args.pitch,", "else DEFAULT_FOV_DEG, pitch_deg=None,",
              (f"{T_CLI}::test_10_pitch_reaches_the_relighter",)),
     Mutation("14 relight CLI: EXIF focal length overrides --fov", "learned/relight_cli.py",
              "fov = args.fov if args.fov is not None else photo.fov_deg if photo.fov_deg is not None else None",

@@ -12,24 +12,12 @@ import torch
 import torch.nn.functional as F
 
 from physrelight import colour
+from physrelight.full_resolution import resize_short_side
 from physrelight.guided_filter import box_filter
 from physrelight.sky_mask import (VARIANCE_FLOOR, _boundary_band, _dilate, _local_gaussian_nll, _local_gaussian_nll_at,
                                    _local_mean, _roughness, grow_sky_by_colour, label_components, log_noise_sigma,
                                    refine_sky_boundary,
                                    resized_noise_roughness, sky_roughness)
-
-
-def _resize_short_side(x: torch.Tensor, res: int) -> torch.Tensor:
-    """``x (B, C, H, W)`` with its short side at ``res`` as the segmenter resizes (``learned.data.resize_short_side``):
-    area averaging when shrinking, bilinear when enlarging."""
-    h, w = x.shape[-2:]
-    k = res / min(h, w)
-    size = (max(1, round(h * k)), max(1, round(w * k)))
-    if size == (h, w):
-        return x
-    if k < 1:
-        return F.interpolate(x, size=size, mode="area")
-    return F.interpolate(x, size=size, mode="bilinear", align_corners=False)
 
 
 def test_01_a_lattice_against_the_sky_is_decided_at_full_resolution() -> None:
@@ -255,7 +243,7 @@ def test_09_the_noise_roughness_after_resizing_is_the_resized_noises(size, worki
     g = torch.Generator().manual_seed(11)
     draws = []
     for _ in range(8):
-        y = _resize_short_side(torch.randn(1, 1, *size, generator=g, dtype=torch.float64), min(working))
+        y = resize_short_side(torch.randn(1, 1, *size, generator=g, dtype=torch.float64), min(working))
         assert tuple(y.shape[-2:]) == working
         m = box_filter(y, 1)
         draws.append(float((box_filter(y * y, 1) - m * m)[0, 0, 1:-1, 1:-1].mean()))
