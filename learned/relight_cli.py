@@ -314,7 +314,12 @@ def _relight(args: argparse.Namespace) -> int:
             frames = relighter.relight_sequence(image, target, azimuths, progress=not args.quiet, **common)
         else:
             with _stage_bar(relighter, enabled=not args.quiet and image.shape[0] * image.shape[1] >= PROGRESS_PIXELS):
-                layers = relighter.relight_layers(image, target, azimuth_deg=args.azimuth, linear=linear, **common)
+                if args.layers is None:  # the relit photo alone: the full-size layers cost 4 box passes on 12 MP
+                    layers = {"relit": relighter.relight(image, target, azimuth_deg=args.azimuth, linear=linear,
+                                                         **common)}
+                else:
+                    layers = relighter.relight_layers(image, target, azimuth_deg=args.azimuth, linear=linear,
+                                                      **common)
     for w in {str(w.message) for w in caught if issubclass(w.category, UserWarning) and "NumPy array" not in str(w.message)}:
         print(f"physrelight: warning: {w}", file=sys.stderr)
     if args.sequence:
