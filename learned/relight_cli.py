@@ -72,7 +72,7 @@ SUN_AZIMUTH_LIMIT = 360.0
 number is far likelier a slip (swapped or mistyped arguments) than a meant turn."""
 PROGRESS_PIXELS = 1_000_000
 """A single relighting of a photo this large (pixels) or larger shows its stages on stderr unless ``--quiet``:
-about 5 s at one thread for 2000 x 1334, 40 s for 4000 x 2669 (docs/bench.md)."""
+about 9 s at one thread for 2000 x 1334, 31 s for 4000 x 2669 (docs/bench.md)."""
 DECOMPOSITION_LAYERS = ("albedo", "normals", "shadow", "target_shadow", "shading")
 """The layers of ``--layers`` that describe surfaces: written transparent on the sky (:func:`layer_with_alpha`)."""
 LAYER_FILES = ("relit", *DECOMPOSITION_LAYERS, "sky_mask")
