@@ -80,8 +80,9 @@ LAYER_FILES = ("relit", *DECOMPOSITION_LAYERS, "sky_mask")
 
 
 @contextlib.contextmanager
-def _stage_bar(relighter: Any, enabled: bool) -> Iterator[None]:
-    """While open, a progress bar on stderr that advances with ``relighter``'s stages (``Relighter.on_stage``)."""
+def _stage_bar(relighter: Any, enabled: bool, layers: bool = True) -> Iterator[None]:
+    """While open, a progress bar on stderr that advances with ``relighter``'s stages (``Relighter.on_stage``):
+    ``RELIGHT_STAGES``, less the last (``"layers"``) when the layers are not made."""
     if not enabled:
         yield
         return
@@ -89,7 +90,8 @@ def _stage_bar(relighter: Any, enabled: bool) -> Iterator[None]:
 
     from .relighter import RELIGHT_STAGES
 
-    bar = tqdm(total=len(RELIGHT_STAGES), desc="relight", unit="stage", dynamic_ncols=True, file=sys.stderr)
+    stages = RELIGHT_STAGES if layers else RELIGHT_STAGES[:-1]
+    bar = tqdm(total=len(stages), desc="relight", unit="stage", dynamic_ncols=True, file=sys.stderr)
     seen: list[str] = []
 
     def on_stage(name: str) -> None:
@@ -101,7 +103,7 @@ def _stage_bar(relighter: Any, enabled: bool) -> Iterator[None]:
     relighter.on_stage = on_stage
     try:
         yield
-        bar.update(len(RELIGHT_STAGES) - bar.n)
+        bar.update(len(stages) - bar.n)
     finally:
         relighter.on_stage = None
         bar.close()
@@ -313,7 +315,8 @@ def _relight(args: argparse.Namespace) -> int:
             azimuths = args.azimuth + 360.0 * np.arange(args.sequence) / args.sequence
             frames = relighter.relight_sequence(image, target, azimuths, progress=not args.quiet, **common)
         else:
-            with _stage_bar(relighter, enabled=not args.quiet and image.shape[0] * image.shape[1] >= PROGRESS_PIXELS):
+            with _stage_bar(relighter, enabled=not args.quiet and image.shape[0] * image.shape[1] >= PROGRESS_PIXELS,
+                            layers=args.layers is not None):
                 if args.layers is None:  # the relit photo alone: the full-size layers cost 4 box passes on 12 MP
                     layers = {"relit": relighter.relight(image, target, azimuth_deg=args.azimuth, linear=linear,
                                                          **common)}
