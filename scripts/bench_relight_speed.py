@@ -9,6 +9,9 @@ timed in the same run at the same thread count, so the figures in passes hold on
 
     PYTHONPATH=. .venv/bin/python scripts/bench_relight_speed.py --runs 3 --threads 1 2 --json speed.json
 
+The JSON holds, per thread count, the box pass (median of its timings before and after the runs), the 1-minute load
+average before and after, and each stage's median seconds and passes. Results: docs/bench.md, "Speed of relight".
+
 ``--profile FILE`` also writes a cProfile of the last run (``python -m pstats FILE``).
 """
 
@@ -62,7 +65,6 @@ class StageClock:
 @contextlib.contextmanager
 def patched(clock: StageClock):
     """Wrap the stages' functions where the pipeline looks them up; restore them after."""
-    import learned.relight_cli as cli_mod
     import learned.relighter as rl
     import learned.sky_segmentation as seg
     import physrelight.guided_filter as gf
@@ -102,7 +104,6 @@ def patched(clock: StageClock):
             setattr(owner, attr, classmethod(clock.wrap(orig.__func__, name)))
         else:
             setattr(owner, attr, clock.wrap(orig, name))
-    _ = cli_mod
     try:
         yield
     finally:
