@@ -75,7 +75,7 @@ SUN_AZIMUTH_LIMIT = 360.0
 number is far likelier a slip (swapped or mistyped arguments) than a meant turn."""
 PROGRESS_PIXELS = 1_000_000
 """A single relighting of a photo this large (pixels) or larger shows its stages on stderr unless ``--quiet``:
-about 5 s at one thread for 2000 x 1334, 40 s for 4000 x 2669 (docs/bench.md)."""
+about 9 s at one thread for 2000 x 1334, 31 s for 4000 x 2669 (docs/bench.md)."""
 DECOMPOSITION_LAYERS = ("albedo", "normals", "shadow", "target_shadow", "shading")
 """The layers of ``--layers`` that describe surfaces: written transparent on the sky (:func:`layer_with_alpha`)."""
 LAYER_FILES = ("relit", *DECOMPOSITION_LAYERS, "sky_mask")
@@ -83,8 +83,9 @@ LAYER_FILES = ("relit", *DECOMPOSITION_LAYERS, "sky_mask")
 
 
 @contextlib.contextmanager
-def _stage_bar(relighter: Any, enabled: bool) -> Iterator[None]:
-    """While open, a progress bar on stderr that advances with ``relighter``'s stages (``Relighter.on_stage``)."""
+def _stage_bar(relighter: Any, enabled: bool, layers: bool = True) -> Iterator[None]:
+    """While open, a progress bar on stderr that advances with ``relighter``'s stages (``Relighter.on_stage``):
+    ``RELIGHT_STAGES``, less the last (``"layers"``) when the layers are not made."""
     if not enabled:
         yield
         return
@@ -92,7 +93,8 @@ def _stage_bar(relighter: Any, enabled: bool) -> Iterator[None]:
 
     from .relighter import RELIGHT_STAGES
 
-    bar = tqdm(total=len(RELIGHT_STAGES), desc="relight", unit="stage", dynamic_ncols=True, file=sys.stderr)
+    stages = RELIGHT_STAGES if layers else RELIGHT_STAGES[:-1]
+    bar = tqdm(total=len(stages), desc="relight", unit="stage", dynamic_ncols=True, file=sys.stderr)
     seen: list[str] = []
 
     def on_stage(name: str) -> None:
@@ -104,7 +106,7 @@ def _stage_bar(relighter: Any, enabled: bool) -> Iterator[None]:
     relighter.on_stage = on_stage
     try:
         yield
-        bar.update(len(RELIGHT_STAGES) - bar.n)
+        bar.update(len(stages) - bar.n)
     finally:
         relighter.on_stage = None
         bar.close()
@@ -320,8 +322,14 @@ def _relight(args: argparse.Namespace) -> int:
             azimuths = args.azimuth + 360.0 * np.arange(args.sequence) / args.sequence
             frames = relighter.relight_sequence(image, target, azimuths, progress=not args.quiet, **common)
         else:
-            with _stage_bar(relighter, enabled=not args.quiet and image.shape[0] * image.shape[1] >= PROGRESS_PIXELS):
-                layers = relighter.relight_layers(image, target, azimuth_deg=args.azimuth, linear=linear, **common)
+            with _stage_bar(relighter, enabled=not args.quiet and image.shape[0] * image.shape[1] >= PROGRESS_PIXELS,
+                            layers=args.layers is not None):
+                if args.layers is None:  # the relit photo alone: the full-size layers cost 4 box passes on 12 MP
+                    layers = {"relit": relighter.relight(image, target, azimuth_deg=args.azimuth, linear=linear,
+                                                         **common)}
+                else:
+                    layers = relighter.relight_layers(image, target, azimuth_deg=args.azimuth, linear=linear,
+                                                      **common)
     for w in {str(w.message) for w in caught if issubclass(w.category, UserWarning) and "NumPy array" not in str(w.message)}:
         print(f"physrelight: warning: {w}", file=sys.stderr)
     if args.layers is not None:  # the sun and sky read from the photo (physrelight lighting), before any write

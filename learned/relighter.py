@@ -584,8 +584,18 @@ class Relighter:
                         reuse["grey_world"] = float(grey_world_level(full["working_image"], out["normals"],
                                                                      out["lighting"], ~small_sky)[0])
                     k *= reuse["grey_world"]
-                radiance = rendered_sky(sky_from, target, K, T, h, w, sky_type, azimuth_deg) * k
-                relit = torch.where(sky, radiance.permute(2, 0, 1)[None].to(relit.dtype), relit)
+                # rendered over the sky's bounding box only: a camera whose principal point moves with the crop
+                # sees the same rays (to float64 rounding), and most photos' sky is a band at the top
+                rows, cols = torch.nonzero(sky[0, 0].any(1))[:, 0], torch.nonzero(sky[0, 0].any(0))[:, 0]
+                r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+                K_box = np.array(K, dtype=np.float64)
+                K_box[0, 2] -= c0
+                K_box[1, 2] -= r0
+                radiance = rendered_sky(sky_from, target, K_box, T, r1 - r0, c1 - c0, sky_type, azimuth_deg) * k
+                relit = relit.clone()
+                relit[..., r0:r1, c0:c1] = torch.where(sky[..., r0:r1, c0:c1],
+                                                       radiance.permute(2, 0, 1)[None].to(relit.dtype),
+                                                       relit[..., r0:r1, c0:c1])
             elif sky_from == "gan":
                 relit = self.paint_sky(relit, sky, out, small_sky, seed=req.seed)
         relit = relit * exposure_gain(req.exposure, relit, lin, ~sky, highlights=sky)[:, None, None, None]

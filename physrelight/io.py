@@ -365,9 +365,16 @@ def read_mask(path: str | os.PathLike) -> np.ndarray:
     return arr >= 128
 
 
+PNG_COMPRESS_LEVEL = 1
+"""zlib level of :func:`write_png`. A PNG is lossless at any level; only size and time change. The relit rocket.jpg
+at 4000 x 2669 (2-core AMD EPYC, loaded, median of 3): level 1 1.17 s and 8.8 MB, level 3 1.84 s and 8.2 MB,
+level 6 (Pillow's default, used before) 4.60 s and 7.0 MB: level 1 saves three quarters of the time for a quarter
+more bytes."""
+
+
 def write_png(path: str | os.PathLike, image: Array) -> None:
     """Write display values ``(H, W)``, ``(H, W, 1)``, ``(H, W, 3)`` or with alpha ``(H, W, 2)`` (grey) /
-    ``(H, W, 4)`` (RGB) in [0, 1] as an 8-bit PNG (rounded, clipped)."""
+    ``(H, W, 4)`` (RGB) in [0, 1] as an 8-bit PNG (rounded, clipped; zlib level :data:`PNG_COMPRESS_LEVEL`)."""
     from PIL import Image
 
     t, _ = to_tensor(image, "image")
@@ -380,7 +387,7 @@ def write_png(path: str | os.PathLike, image: Array) -> None:
         arr = arr[..., 0]
     u8 = np.clip(np.round(arr * 255.0), 0, 255).astype(np.uint8)
     with atomic_path(path, ".png") as tmp:
-        Image.fromarray(u8).save(tmp, format="PNG")
+        Image.fromarray(u8).save(tmp, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
 
 
 def write_json(path: str | os.PathLike, data: Any) -> None:

@@ -161,8 +161,9 @@ def test_05_denoise_is_the_relighters_option(photo: Path, tmp_path: Path) -> Non
 def test_06_a_large_photo_shows_its_stages_and_quiet_shows_nothing(photo: Path, tmp_path: Path, capsys,
                                                                   monkeypatch) -> None:
     """A single relighting of a photo of ``PROGRESS_PIXELS`` or more shows a bar on stderr that steps through
-    ``RELIGHT_STAGES`` to the end (lowered here to this small photo's size); ``--quiet`` shows none, and neither does
-    a smaller photo. The picture is the same either way, and the relighter's stage hook is taken off afterwards."""
+    ``RELIGHT_STAGES`` to the end (lowered here to this small photo's size; without ``--layers`` the last stage,
+    ``"layers"``, is not run and not counted); ``--quiet`` shows none, and neither does a smaller photo. The picture
+    is the same either way, and the relighter's stage hook is taken off afterwards."""
     from learned import relight_cli
     from learned.relighter import RELIGHT_STAGES, Relighter
 
@@ -175,8 +176,14 @@ def test_06_a_large_photo_shows_its_stages_and_quiet_shows_nothing(photo: Path, 
     monkeypatch.setattr(Relighter, "load", classmethod(lambda cls, *a, **k: seen.append(load(*a, **k)) or seen[-1]))
     assert main(base + ["-o", str(tmp_path / "big.png")]) == 0
     err = capsys.readouterr().err
+    n = len(RELIGHT_STAGES) - 1
+    assert f"{n}/{n}" in err and RELIGHT_STAGES[-2] in err and RELIGHT_STAGES[-1] not in err
+    assert seen[-1].on_stage is None
+    assert main(base + ["-o", str(tmp_path / "layered.png"), "--layers", str(tmp_path / "layers")]) == 0
+    err = capsys.readouterr().err
     assert f"{len(RELIGHT_STAGES)}/{len(RELIGHT_STAGES)}" in err and RELIGHT_STAGES[-1] in err
     assert seen[-1].on_stage is None
+    assert np.array_equal(io.read_image(tmp_path / "layered.png"), io.read_image(tmp_path / "big.png"))
     assert main(base + ["-o", str(tmp_path / "quiet.png"), "--quiet"]) == 0
     assert capsys.readouterr().err == ""
     assert np.array_equal(io.read_image(tmp_path / "big.png"), io.read_image(tmp_path / "small.png"))

@@ -349,3 +349,21 @@ def test_13_sky_between_towers_is_kept_when_half_as_bright_and_as_blue(brightnes
     image = torch.where(inner, brightness * SKY_BLUE, torch.where(top, SKY_BLUE, _sky_over_texture()))
     sky, why = ss.plausible_sky(top | inner, image)
     assert why == "" and torch.equal(sky, top | inner if kept else top)
+
+
+@pytest.mark.parametrize("r", [17, 40, 129, 400])
+def test_14_the_wide_dilation_by_running_maxima_is_the_window_counts(r: int) -> None:
+    """A wide dilation and band (``r`` > 16) from scipy's running maximum and minimum give the same bits as the
+    window count of summed-area tables they replaced (``box_filter`` of the mask in float64 > 0, and between 0 and
+    1 for the band), windows cut at the border, on blobs, a single pixel and an empty mask."""
+    from physrelight.guided_filter import box_filter
+
+    g = torch.Generator().manual_seed(r)
+    h, w = 150, 230
+    blobs = F.interpolate(torch.rand(1, 1, 7, 11, generator=g), size=(h, w), mode="bilinear") > 0.6
+    dot = torch.zeros(1, 1, h, w, dtype=torch.bool)
+    dot[..., 3, w - 2] = True
+    for m in (blobs, dot, torch.zeros_like(dot), ~dot):
+        share = box_filter(m.to(torch.float64), min(r, max(h, w)))
+        assert torch.equal(_dilate(m, r), share > 0)
+        assert torch.equal(_boundary_band(m, r), (share > 0) & (share < 1))
