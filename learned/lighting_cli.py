@@ -160,10 +160,7 @@ def _lighting(args: argparse.Namespace) -> int:
     image = photo.image
     mask = None
     if args.mask is not None:
-        mask = io.read_mask(args.mask)
-        if mask.shape != image.shape[:2]:
-            raise ValueError(f"mask {args.mask!r} is {mask.shape[1]}x{mask.shape[0]}, the photo "
-                             f"{image.shape[1]}x{image.shape[0]}")
+        mask = io.read_mask(args.mask, shape=image.shape[:2])
     from .relight_options import DEFAULT_FOV_DEG, RelightOptions
     from .relighter import Relighter
 

@@ -290,10 +290,7 @@ def _relight(args: argparse.Namespace) -> int:
         _check_sequence(args.sequence, *image.shape[:2])
     mask = None
     if args.mask is not None:
-        mask = io.read_mask(args.mask)
-        if mask.shape != image.shape[:2]:
-            raise ValueError(f"mask {args.mask!r} is {mask.shape[1]}x{mask.shape[0]}, the photo "
-                             f"{image.shape[1]}x{image.shape[0]}")
+        mask = io.read_mask(args.mask, shape=image.shape[:2])
         if mask.all() or not mask.any():
             raise ValueError(f"mask {args.mask!r} marks {'every' if mask.all() else 'no'} pixel as sky "
                              f"(white = sky, black = the scene)")

@@ -337,11 +337,12 @@ def read_photo(path: str | os.PathLike) -> Photo:
     return Photo(arr.astype(np.float32) / 255.0, exif_fov_deg(exif, width, height), alpha, notes)
 
 
-def read_mask(path: str | os.PathLike) -> np.ndarray:
+def read_mask(path: str | os.PathLike, shape: tuple[int, int] | None = None) -> np.ndarray:
     """Read a mask PNG as bool ``(H, W)``: white (>= 128) is on, black off.
 
     Single-channel (grey) or RGB with three equal channels; anything else (a colour photo given
-    as a mask) is refused with a ``ValueError``, as is an alpha channel that is not opaque.
+    as a mask) is refused with a ``ValueError``, as is an alpha channel that is not opaque, and, with
+    ``shape`` (the photo's ``(H, W)``), a mask of another size.
     """
     from PIL import Image, UnidentifiedImageError
 
@@ -362,6 +363,8 @@ def read_mask(path: str | os.PathLike) -> np.ndarray:
                 raise ValueError(f"mask {str(p)!r} is a {im.mode!r} image; a mask is grey-scale (white = sky)")
     except (UnidentifiedImageError, OSError) as err:
         raise ValueError(f"cannot read {str(p)!r} as an image: {err}") from None
+    if shape is not None and arr.shape != tuple(shape):
+        raise ValueError(f"mask {str(path)!r} is {arr.shape[1]}x{arr.shape[0]}, the photo {shape[1]}x{shape[0]}")
     return arr >= 128
 
 
