@@ -19,6 +19,7 @@ from physrelight.cli import main
 from physrelight.colour import LUMINANCE, linear_to_srgb
 from physrelight.panorama import camera_rays, level_camera, view_intrinsics
 from physrelight.sky_model import overcast_sky
+from ..cli_refusal import refused
 
 H, W, FOV, PITCH = 120, 160, 60.0, 12.0
 SUN_ELEV, SUN_AZIM, TURBIDITY = 25.0, 10.0, 3.0  # in view: 10 deg right of straight ahead, 25 deg up
@@ -187,11 +188,7 @@ def test_05_a_night_photo_has_no_sun(tmp_path: Path, clear_sky, capsys) -> None:
 
 def _refused(capsys, args: list[str], match: str, folder: Path) -> None:
     before = sorted(p.name for p in folder.iterdir())
-    rc = main(["lighting", *args])
-    err = capsys.readouterr().err
-    assert rc == 2, err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    assert match in err, err
+    refused(capsys, ["lighting", *args], match)
     assert sorted(p.name for p in folder.iterdir()) == before  # nothing written, no debris
 
 

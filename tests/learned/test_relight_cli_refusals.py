@@ -10,6 +10,7 @@ import pytest
 
 from physrelight import io
 from physrelight.cli import main
+from ..cli_refusal import refused
 
 
 @pytest.fixture()
@@ -21,15 +22,6 @@ def photo(tmp_path: Path) -> Path:
     path = tmp_path / "photo.png"
     io.write_png(path, img)
     return path
-
-
-def _refused(capsys, args: list[str], match: str) -> str:
-    rc = main(args)
-    err = capsys.readouterr().err
-    assert rc == 2, err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    assert match in err, err
-    return err
 
 
 def _argparse_refused(capsys, args: list[str], match: str) -> str:
@@ -46,7 +38,7 @@ def test_01_a_sequence_beyond_the_frame_cap_is_refused_before_any_work(photo: Pa
                                                                       capsys) -> None:
     from learned.relight_cli import MAX_SEQUENCE
 
-    _refused(capsys, ["relight", str(photo), "--sun", "20", "0", "--sequence", "100000000",
+    refused(capsys, ["relight", str(photo), "--sun", "20", "0", "--sequence", "100000000",
                       "-o", str(tmp_path / "a.gif")], f"at most {MAX_SEQUENCE} frames")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["photo.png"]
 
@@ -61,7 +53,7 @@ def test_02_a_sequence_that_does_not_fit_in_memory_is_refused_with_the_numbers(p
 
     assert sequence_bytes(100, 40, 56) == 100 * 40 * 56 * 15
     monkeypatch.setattr(cli_common, "available_memory", lambda: 1 << 20)
-    err = _refused(capsys, ["relight", str(photo), "--sun", "20", "0", "--sequence", "100",
+    err = refused(capsys, ["relight", str(photo), "--sun", "20", "0", "--sequence", "100",
                             "-o", str(tmp_path / "a.gif")], "--sequence 100 of a 56x40 photo")
     assert "3.2 MiB" in err and "1.0 MiB available" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["photo.png"]
@@ -78,7 +70,7 @@ def test_03_the_output_may_not_be_the_input_photo(photo: Path, tmp_path: Path, c
     out = {"same": str(photo), "dot": "./photo.png", "link": str(tmp_path / "link.png")}[spelling]
     if spelling == "link":
         (tmp_path / "link.png").symlink_to(photo)
-    _refused(capsys, ["relight", str(photo), "--sun", "20", "0", "-o", out], "is the input photo")
+    refused(capsys, ["relight", str(photo), "--sun", "20", "0", "-o", out], "is the input photo")
     assert photo.read_bytes() == before
 
 
@@ -92,7 +84,7 @@ def test_04_layers_beside_the_photo_are_fine_but_not_the_photo_itself(photo: Pat
     named = tmp_path / "sub" / "albedo.png"
     named.parent.mkdir()
     named.write_bytes(before)
-    _refused(capsys, ["relight", str(named), "--sun", "20", "0", "--layers", str(named.parent),
+    refused(capsys, ["relight", str(named), "--sun", "20", "0", "--layers", str(named.parent),
                       "-o", str(tmp_path / "o2.png")], "is the input photo")
     assert named.read_bytes() == before and not (tmp_path / "o2.png").exists()
 
@@ -115,7 +107,7 @@ def test_05_a_non_finite_sun_angle_is_its_own_error(photo: Path, tmp_path: Path,
     (["0", "10"], "above the horizon"),
 ])
 def test_06_sun_angles_are_bounded(photo: Path, tmp_path: Path, capsys, sun: list[str], match: str) -> None:
-    _refused(capsys, ["relight", str(photo), "--sun", *sun, "-o", str(tmp_path / "o.png")], match)
+    refused(capsys, ["relight", str(photo), "--sun", *sun, "-o", str(tmp_path / "o.png")], match)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["photo.png"]
 
 
@@ -135,8 +127,8 @@ def test_08_output_paths_are_checked_before_any_work(photo: Path, tmp_path: Path
     (tmp_path / "FOLDER").mkdir()
     (tmp_path / "FILE").write_text("x")
     out = where if where.startswith("/") else str(tmp_path / where)
-    _refused(capsys, ["relight", str(photo), "--sun", "20", "0", "-o", out], match)
-    _refused(capsys, ["relight", str(photo), "--sun", "20", "0", "--layers", str(tmp_path / "FILE"),
+    refused(capsys, ["relight", str(photo), "--sun", "20", "0", "-o", out], match)
+    refused(capsys, ["relight", str(photo), "--sun", "20", "0", "--layers", str(tmp_path / "FILE"),
                       "-o", str(tmp_path / "o.png")], "--layers")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["FILE", "FOLDER", "photo.png"]
 

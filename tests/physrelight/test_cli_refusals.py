@@ -9,15 +9,7 @@ from pathlib import Path
 import pytest
 
 from physrelight import cli, cli_common
-
-
-def _refused(capsys, args: list[str], match: str) -> str:
-    rc = cli.main(args)
-    err = capsys.readouterr().err
-    assert rc == 2, err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    assert err.startswith("physrelight: error:") and match in err, err
-    return err
+from ..cli_refusal import refused
 
 
 @pytest.fixture()
@@ -81,7 +73,7 @@ def test_04_every_subcommand_checks_its_outputs_before_any_work(place: Path, cap
     """The inputs named here do not exist: the output check comes first, so no stage even looks for them."""
     if args[0] == "demo":
         args = [*args, "--physics-only"]
-    _refused(capsys, args, match)
+    refused(capsys, args, match)
     assert sorted(os.listdir(place)) == ["DIR", "FILE"]
 
 

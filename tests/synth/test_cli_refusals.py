@@ -10,21 +10,17 @@ import numpy as np
 import pytest
 
 from physrelight.cli import main
+from ..cli_refusal import refused
+
+
+def _refused_last(capsys, args: list[str], match: str) -> str:
+    return refused(capsys, args, match, last_line=True)
+
 
 pytest.importorskip("mitsuba")
 
 TINY = ["--scenes", "1", "--views", "1", "--lights", "1", "--res", "24", "--spp", "2", "--gbuffer-spp", "1",
         "--shadow-spp", "1", "--env-res", "16", "--kinds", "sunsky"]
-
-
-def _refused(capsys, args: list[str], match: str) -> str:
-    rc = main(args)
-    err = capsys.readouterr().err
-    assert rc == 2, err
-    last = err.rstrip("\n").split("\n")[-1]
-    assert last.startswith("physrelight: error:") and match in last, err  # its own line, after any progress bar
-    assert "Traceback" not in err
-    return last
 
 
 def test_01_a_scene_that_cannot_fit_in_memory_is_refused_with_the_numbers(tmp_path: Path, capsys) -> None:
@@ -35,7 +31,7 @@ def test_01_a_scene_that_cannot_fit_in_memory_is_refused_with_the_numbers(tmp_pa
 
     need = writer.scene_bytes(writer.SynthConfig(res=100_000))
     assert need > 100_000**2 * 500
-    last = _refused(capsys, ["synth", str(tmp_path / "ds"), "--res", "100000", "--quiet"],
+    last = _refused_last(capsys, ["synth", str(tmp_path / "ds"), "--res", "100000", "--quiet"],
                     "rendering one 100000 x 100000 scene needs about")
     assert f"{need / 2**30:.1f} GiB" in last and "available" in last
     assert list(tmp_path.iterdir()) == []
@@ -60,7 +56,7 @@ def _maps(tmp_path: Path, bad: str) -> Path:
 @pytest.mark.parametrize("bad", ["truncated", "text", "shape"])
 def test_02_every_input_map_is_read_and_checked_first(tmp_path: Path, capsys, bad: str) -> None:
     maps = _maps(tmp_path, bad)
-    _refused(capsys, ["synth", str(tmp_path / "ds"), *TINY[:-1], "hdri", "--hdri-dir", str(maps)], "broken.exr")
+    _refused_last(capsys, ["synth", str(tmp_path / "ds"), *TINY[:-1], "hdri", "--hdri-dir", str(maps)], "broken.exr")
     assert not (tmp_path / "ds").exists()
 
 
@@ -75,10 +71,10 @@ def test_03_a_run_that_fails_leaves_nothing_and_prints_its_error_on_its_own_line
         raise ValueError("the renderer gave up")
 
     monkeypatch.setattr(render, "render_lit", fail)
-    _refused(capsys, ["synth", str(tmp_path / "ds"), *TINY], "the renderer gave up")  # progress bar on
+    _refused_last(capsys, ["synth", str(tmp_path / "ds"), *TINY], "the renderer gave up")  # progress bar on
     assert list(tmp_path.iterdir()) == []
     (tmp_path / "kept").mkdir()
-    _refused(capsys, ["synth", str(tmp_path / "kept"), *TINY, "--quiet"], "the renderer gave up")
+    _refused_last(capsys, ["synth", str(tmp_path / "kept"), *TINY, "--quiet"], "the renderer gave up")
     assert [p.name for p in tmp_path.iterdir()] == ["kept"] and list((tmp_path / "kept").iterdir()) == []
 
 
@@ -90,5 +86,5 @@ def test_04_a_failed_run_keeps_what_earlier_runs_finished(tmp_path: Path, capsys
     before = sorted(p.name for p in ds.iterdir())
     assert before == ["manifest.json", "scene_0000"]
     monkeypatch.setattr(render, "render_lit", lambda *a, **k: (_ for _ in ()).throw(ValueError("gave up")))
-    _refused(capsys, ["synth", str(ds), *TINY, "--scenes", "2", "--quiet"], "gave up")
+    _refused_last(capsys, ["synth", str(ds), *TINY, "--scenes", "2", "--quiet"], "gave up")
     assert sorted(p.name for p in ds.iterdir()) == before  # no .scene_0001.partial; the manifest stays

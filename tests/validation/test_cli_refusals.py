@@ -8,15 +8,7 @@ from pathlib import Path
 import pytest
 
 from physrelight.cli import main
-
-
-def _refused(capsys, args: list[str], match: str) -> str:
-    rc = main(args)
-    err = capsys.readouterr().err
-    assert rc == 2, err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    assert err.startswith("physrelight: error:") and match in err, err
-    return err
+from ..cli_refusal import refused
 
 
 @pytest.fixture()
@@ -44,7 +36,7 @@ def test_01_an_output_folder_that_cannot_be_made_is_refused_first(tmp_path: Path
                                                                   command: list[str], where: str, match: str) -> None:
     monkeypatch.chdir(tmp_path)
     Path("FILE").write_text("x")
-    _refused(capsys, [*command, "-o", where], match)
+    refused(capsys, [*command, "-o", where], match)
     assert spy == [] and sorted(p.name for p in tmp_path.iterdir()) == ["FILE"]
 
 
@@ -63,7 +55,7 @@ def test_01_an_output_folder_that_cannot_be_made_is_refused_first(tmp_path: Path
 ])
 def test_02_an_option_the_chosen_bench_would_ignore_is_refused(tmp_path: Path, capsys, spy, args: list[str],
                                                                match: str) -> None:
-    _refused(capsys, ["bench", *args, "-o", str(tmp_path / "out")], match)
+    refused(capsys, ["bench", *args, "-o", str(tmp_path / "out")], match)
     assert spy == [] and list(tmp_path.iterdir()) == []
 
 
@@ -93,7 +85,7 @@ def test_04_a_bench_without_llvm_names_the_real_setup_command(tmp_path: Path, ca
     from synth import backend
 
     monkeypatch.setattr(backend, "find_llvm", lambda: None)
-    err = _refused(capsys, ["bench", "-o", str(tmp_path / "out")], "bash scripts/setup.sh")
+    err = refused(capsys, ["bench", "-o", str(tmp_path / "out")], "bash scripts/setup.sh")
     assert "--no-abs" in err and "make setup" not in err
     assert spy == [] and list(tmp_path.iterdir()) == []
     assert "make setup" not in backend._INSTALL_HINT and "bash scripts/setup.sh" in backend._INSTALL_HINT
