@@ -52,7 +52,8 @@ def sun_path(hours: Sequence[float], latitude_deg: float = 40.0, declination_deg
     """``(hour, elevation, azimuth)`` in degrees of the sun at local solar ``hours`` (azimuth clockwise from
     north = -Z, synth's convention), keeping the hours with the sun at least ``min_elevation`` up.
 
-    The same spherical astronomy as ``validation.bench.data.sun_path`` (which synth may not import).
+    Standard spherical astronomy, no refraction; the bench's time-lapse view takes its sun from here too
+    (:func:`validation.bench.data.timelapse_lights`).
     """
     phi, dec = math.radians(latitude_deg), math.radians(declination_deg)
     out = []

@@ -9,7 +9,7 @@ Two sources, one in-memory form (:class:`BenchView`):
   seeded, so they are exactly the ones the folder was rendered from.
 * :func:`render_recipes` renders small scenes whose lighting is *chosen* so that every
   stratum has members (low sun, overcast, twilight, glossy materials, very bright and very
-  dark albedo) and the time-lapse view (:func:`sun_path`: one camera, the sun moving
+  dark albedo) and the time-lapse view (:func:`synth.timelapse.sun_path`: one camera, the sun moving
   through a day). Rendering follows :func:`synth.writer.write_scene` step for step
   (same renderer, same photo nuisances), at 64 px with a fixed seed.
 
@@ -27,6 +27,8 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+
+from synth.timelapse import sun_path
 
 from ..common import LUMINANCE
 
@@ -274,23 +276,6 @@ class Recipe:
     lights: tuple[LightSpec, ...]
     glossy_fraction: float = 0.0
     albedo_scale: float = 1.0
-
-
-def sun_path(hours: Sequence[float], latitude_deg: float = 40.0, declination_deg: float = 10.0,
-             min_elevation: float = 3.0) -> list[tuple[float, float, float]]:
-    """``(hour, elevation, azimuth)`` of the sun at local solar ``hours`` (degrees; azimuth
-    clockwise from north = -Z, synth's convention), keeping hours with the sun at least
-    ``min_elevation`` above the horizon. Standard spherical astronomy, no refraction."""
-    phi, dec = math.radians(latitude_deg), math.radians(declination_deg)
-    out = []
-    for h in hours:
-        H = math.radians(15.0 * (h - 12.0))
-        el = math.asin(math.sin(phi) * math.sin(dec) + math.cos(phi) * math.cos(dec) * math.cos(H))
-        az = math.atan2(-math.sin(H) * math.cos(dec), math.cos(phi) * math.sin(dec) - math.sin(phi) * math.cos(dec)
-                        * math.cos(H))
-        if math.degrees(el) >= min_elevation:
-            out.append((float(h), math.degrees(el), math.degrees(az) % 360.0))
-    return out
 
 
 def timelapse_lights(hours: Sequence[float]) -> tuple[LightSpec, ...]:
