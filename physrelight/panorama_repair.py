@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from physrelight import envmap, sh
 
@@ -65,21 +66,11 @@ def _luminance(env: np.ndarray) -> np.ndarray:
 
 
 def _dilate_wrapped(mask: np.ndarray, iterations: int) -> np.ndarray:
-    """Square dilation of an ``(H, W)`` mask by ``iterations`` texels, wrapping in u (columns), not in rows.
-
-    Separable: the square structuring element is a row pass then a column pass (numpy only; the core does
-    not depend on scipy)."""
+    """Square dilation of an ``(H, W)`` mask by ``iterations`` texels, wrapping in u (columns), not in rows."""
     if iterations <= 0:
         return mask.copy()
-    h = mask.shape[0]
-    rows = mask.copy()
-    for k in range(1, iterations + 1):
-        rows[k:] |= mask[:h - k]
-        rows[:h - k] |= mask[k:]
-    out = rows.copy()
-    for k in range(1, iterations + 1):
-        out |= np.roll(rows, k, axis=1) | np.roll(rows, -k, axis=1)
-    return out
+    size = 2 * iterations + 1
+    return ndimage.maximum_filter(mask.view(np.uint8), size=size, mode=("constant", "wrap"), cval=0) > 0
 
 
 def find_damaged_windows(env: np.ndarray, block: int = DWA_BLOCK, contrast: float = 50.0,
