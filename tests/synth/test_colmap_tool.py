@@ -5,12 +5,12 @@ in COLMAP's mask convention, black = sky), and COLMAP's CPU pipeline (``feature_
 those masks and the lens's intrinsics, ``exhaustive_matcher``, ``mapper``) reconstructs it. The sparse
 model it writes is read by :mod:`physrelight.colmap_format`; after a similarity alignment of the camera
 centres (Umeyama) the registered cameras' rotations, converted into this library's frame, are compared
-with the rendered cameras': median within 1 degree, the worst within 2 (the brief's "every camera
-within 1 degree" is not met: 1.2-1.4 deg for the worst view; see docs/training-data.md). COLMAP's dense
+with the rendered cameras': every camera within 1 degree (the worst 0.53-0.77 deg in five runs at
+768 px; at 384 px it was 1.0-2.3 deg, see docs/training-data.md). COLMAP's dense
 stereo needs CUDA, so the depth reader is tested on maps written to the documented format
 (``tests/physrelight/test_colmap_format.py``).
 
-Slow (rendering and SfM: 66 s on 2 cores, up to ~6 minutes when they are shared) and needs ``colmap`` on PATH:
+Slow (rendering and SfM: 3.5-5 minutes on 2 busy cores: render 90-150 s, COLMAP 110-190 s) and needs ``colmap`` on PATH:
 ``PHYSRELIGHT_COLMAP=1 bash scripts/setup.sh`` installs it (CI does).
 """
 
@@ -27,7 +27,7 @@ import pytest
 pytestmark = [pytest.mark.slow, pytest.mark.colmap]
 
 VIEWS = 24
-RES = 384
+RES = 768  # at 384 px SIFT's ~0.6 px residual is twice the angle, and the worst view missed 1 deg (1.0-2.3)
 YAW = 30.0  # views within +-YAW degrees of the landmark's front
 ELEVATED = 0.25  # share of views from above eye level (a height baseline as well as a horizontal one)
 FOV = 55.0  # one calibrated lens: COLMAP is given its intrinsics and estimates the poses
@@ -71,7 +71,7 @@ def render_capture(root: Path, views: int = VIEWS, res: int = RES, seed: int = S
 
     The views come from the library's tourist sampler with a capture's spread (yaw within +-25 deg of
     the front, 2-3 landmark radii away, one lens range; the dataset default spreads photos round the
-    whole landmark, too far apart for SIFT at these sizes), lit by one clear sky, path traced at 16 spp
+    whole landmark, too far apart for SIFT at these sizes), lit by one clear sky, path traced at 32 spp
     and written as 8-bit sRGB with an exposure that puts the 99th percentile at white."""
     from physrelight import colour, io
     from synth import cameras, lighting, render, scene
@@ -163,9 +163,9 @@ def test_colmap_reconstruction_is_read_in_the_rendered_frame(tmp_path: Path) -> 
     print(f"\n[colmap] {registered}/{VIEWS} views registered, {len(model.points3D)} points; rotation error "
           f"median {np.median(angles):.3f} max {angles.max():.3f} deg; centre error median {np.median(centres):.4f} "
           f"(camera spread {spread:.2f}); render {t_render:.1f} s, colmap {t_colmap:.1f} s")
-    # The brief asked for every rotation within 1 deg; measured here: median 0.55-0.67, max 1.17-1.44 deg over
-    # five settings (docs/training-data.md). The median is held to 1 deg, the worst view to 2 deg.
-    assert np.median(angles) < 1.0 and angles.max() < 2.0, f"rotation errors {np.round(angles, 3)} deg"
+    # Every camera within 1 deg after the similarity alignment of the centres (the issue's bar); measured in
+    # five runs: worst 0.53-0.77 deg, median 0.36-0.47 deg (docs/training-data.md).
+    assert angles.max() < 1.0, f"rotation errors {np.round(angles, 3)} deg"
     # Without the frame conversion (COLMAP's OpenCV camera taken as this library's) the error is 180 deg.
     flipped = np.diag([1.0, -1.0, -1.0]) @ est[:, :3, :3]
     rel_wrong = truth[:, :3, :3] @ (flipped @ R.T).transpose(0, 2, 1)
