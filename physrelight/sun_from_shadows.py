@@ -46,7 +46,8 @@ from physrelight.colour import LUMINANCE, srgb_to_linear
 from physrelight.panorama import camera_rays
 from physrelight.sun_from_sky import AZIMUTH_STEP_DEG, ELEVATIONS_DEG, _camera
 
-__all__ = ["CueLikelihood", "EDGE_SIGMA_PX", "FREE_SEGMENT_WEIGHT", "GROUND_MAX_TILT_DEG", "MAX_SEGMENT_OBSERVATIONS",
+__all__ = ["CueLikelihood", "EDGE_SIGMA_PX", "FOOT_PX", "FREE_SEGMENT_WEIGHT",
+           "GROUND_MAX_TILT_DEG", "MAX_SEGMENT_OBSERVATIONS",
            "MERGE_GAP_FRACTION", "MIN_EDGE_STEP", "MIN_SIDE_PIXELS", "SEGMENT_OUTLIER", "SEGMENT_SIGMA_DEG",
            "SHADING_CONTRAST_SCALE", "TOUCH_FRACTION",
            "SHADING_MIN_ERROR", "ShadowSegment", "ground_and_casters", "shading_likelihood", "shadow_likelihood",
@@ -69,6 +70,10 @@ this share of the image's longer side (at least 6 pixels) beyond the contact ban
 MERGE_GAP_FRACTION = 0.08
 """Hough pieces of one straight edge (directions within 3 degrees in the image, ends within 2 pixels of each
 other's line) are merged when the gap between them is under this share of the image's longer side."""
+FOOT_PX = 6
+"""A caster is met at its foot (where it stands on the ground) when no caster pixel lies this many rows below the
+point met, within 2 columns of it: its bottom outline. A shadow's edge that runs into a caster's side is hidden by it
+there, and the caster goes on down below that point."""
 CONTACT_BAND_PX = 2
 """Ground pixels this close to a non-ground, non-sky pixel are left out of the edge map: the contact line itself
 is an edge of the caster, not of its shadow."""
@@ -108,6 +113,7 @@ class CueLikelihood:
         azimuth_deg: the cue's own most likely world azimuth (refined to 0.5 degree), None when it did not speak.
         observations: segments read (shadows) or sides compared (shading: 0 or 1).
         detail: what was read, or why nothing was.
+        anchored: shadow segments that touch a caster's foot (the evidence that a sun casts them); 0 for shading.
     """
 
     name: str
@@ -118,6 +124,7 @@ class CueLikelihood:
     azimuth_deg: float | None
     observations: int
     detail: str
+    anchored: int = 0
 
     def azimuth_log_likelihood(self, azimuth_deg: Array) -> np.ndarray:
         """The cue's log-likelihood at any world azimuths ``(N,)`` (degrees), on the same scale as
@@ -264,10 +271,10 @@ def shadow_segments(image: Array, sky_mask: Array, K: Array | None = None, world
         sky_mask: ``(H, W)`` bool.
         K, world_to_camera, pitch_deg, fov_deg: the camera, as :func:`physrelight.sun_from_sky.estimate_sun_from_sky`.
         normals: ``(3, H, W)`` camera-frame normals: they say which pixels are ground and which are casters
-            (:func:`ground_and_casters`). Without them (and without ``ground_mask``) every non-sky pixel below the
-            horizon is taken as ground and no segment can touch a caster (axes only).
-        ground_mask: ``(H, W)`` bool, overrides the ground of the normals (casters: non-sky, non-ground pixels
-            with known normals, or none without normals).
+            (:func:`ground_and_casters`). Without them and without ``ground_mask`` nothing is read (an empty
+            list): a facade's windows are straight edges too.
+        ground_mask: ``(H, W)`` bool, overrides the ground of the normals (casters: the non-sky, non-ground pixels
+            with known normals; without normals, every non-sky, non-ground pixel).
         seed: the Hough transform's random generator (the same seed gives the same segments).
 
     Returns:
@@ -282,14 +289,14 @@ def shadow_segments(image: Array, sky_mask: Array, K: Array | None = None, world
     rays = camera_rays(Kc, R, *shape).numpy()[:, :, 0]
     below = rays[..., 1] < -_HORIZON_MARGIN
     casters = np.zeros(shape, bool)
+    given = _check_mask(ground_mask, shape, "ground_mask")
     if normals is not None:
         ground, casters = ground_and_casters(normals, R, sky)
-    else:
-        ground = ~sky
-    given = _check_mask(ground_mask, shape, "ground_mask")
+    elif given is None:
+        return []  # a facade's windows are straight edges too: without knowing the ground, nothing is read
     if given is not None:
         ground = given & ~sky
-        casters = casters & ~ground
+        casters = casters & ~ground if normals is not None else ~ground & ~sky
     ground = ground & below
     if not ground.any():
         return []
@@ -351,8 +358,8 @@ def shadow_segments(image: Array, sky_mask: Array, K: Array | None = None, world
             continue
         sun = None
         if casters.any():
-            t0 = _meets_foot(casters, ground, p0, -t_dir, reach)
-            t1 = _meets_foot(casters, ground, p1, t_dir, reach)
+            t0 = _meets_foot(casters, p0, -t_dir, reach)
+            t1 = _meets_foot(casters, p1, t_dir, reach)
             if t0 != t1:
                 towards = direction if t1 else -direction  # from the free end to the caster
                 sun = _azimuth(towards[0], towards[1])
@@ -362,12 +369,11 @@ def shadow_segments(image: Array, sky_mask: Array, K: Array | None = None, world
     return out
 
 
-def _meets_foot(casters: np.ndarray, ground: np.ndarray, start: np.ndarray, direction: np.ndarray,
-                reach: float) -> bool:
+def _meets_foot(casters: np.ndarray, start: np.ndarray, direction: np.ndarray, reach: float) -> bool:
     """Whether the ray from pixel position ``start (2,)`` (column, row) along image ``direction (2,)`` meets the
-    foot of a caster within ``reach`` pixels: a caster pixel with ground at most :data:`CONTACT_BAND_PX` + 2
-    pixels below it in the image (where a shadow's edge runs into the caster's side instead, the caster hides the
-    rest of the shadow: that is no contact)."""
+    foot of a caster within ``reach`` pixels: the caster met ends within :data:`FOOT_PX` rows below that point in
+    every column within 2 pixels of it (its bottom outline, where it stands on the ground). Where a shadow's edge runs
+    into the caster's side instead, the caster hides the rest of the shadow: that is no contact."""
     t = np.arange(0.0, reach + 1e-9, 0.5)
     side = np.array([-direction[1], direction[0]])
     h, w = casters.shape
@@ -381,9 +387,10 @@ def _meets_foot(casters: np.ndarray, ground: np.ndarray, start: np.ndarray, dire
     if first is None:
         return False
     c, r = first[1]
-    # the foot: ground straight below the caster pixel met (its own column only: beside a caster's side the ground
-    # is next to it, not under it)
-    return bool(ground[r + 1:min(h, r + CONTACT_BAND_PX + 4), c].any())
+    below = r + FOOT_PX
+    if below >= h:
+        return False  # the caster runs out of the frame: its foot is not seen
+    return not bool(casters[below, max(0, c - 2):c + 3].any())
 
 
 def _merge_collinear(segments: list[tuple[np.ndarray, np.ndarray]], max_gap: float
@@ -449,7 +456,7 @@ def _flat(name: str, detail: str) -> CueLikelihood:
                          _fn=lambda a: np.zeros(np.shape(a)))
 
 
-def _from_fn(name: str, fn, observations: int, detail: str) -> CueLikelihood:
+def _from_fn(name: str, fn, observations: int, detail: str, anchored: int = 0) -> CueLikelihood:
     el, az = _grid()
     fine = np.arange(0.0, 360.0, 0.5)
     ll_fine = fn(fine)
@@ -458,7 +465,7 @@ def _from_fn(name: str, fn, observations: int, detail: str) -> CueLikelihood:
     row = fn(az) - top
     return CueLikelihood(name=name, azimuths_deg=az, elevations_deg=el,
                          log_likelihood=np.repeat(np.minimum(row, 0.0)[None], len(el), 0), spoke=True,
-                         azimuth_deg=best, observations=observations, detail=detail,
+                         azimuth_deg=best, observations=observations, detail=detail, anchored=anchored,
                          _fn=lambda a: fn(np.asarray(a, dtype=np.float64)) - top)
 
 
@@ -480,11 +487,13 @@ def shadow_likelihood(image: Array, sky_mask: Array, K: Array | None = None, wor
     """
     segments = shadow_segments(image, sky_mask, K, world_to_camera, normals=normals, ground_mask=ground_mask,
                                pitch_deg=pitch_deg, fov_deg=fov_deg, linear=linear, seed=seed)
+    if normals is None and ground_mask is None:
+        return _flat("shadows", "the ground is not known (give normals or ground_mask)")
     if not segments:
         return _flat("shadows", "no straight edge strong enough on the ground")
     anchored = sum(s.sun_azimuth_deg is not None for s in segments)
     return _from_fn("shadows", _segments_fn(segments), len(segments),
-                    f"{len(segments)} edge segments on the ground, {anchored} touching a caster")
+                    f"{len(segments)} edge segments on the ground, {anchored} touching a caster", anchored)
 
 
 def shading_likelihood(image: Array, normals: Array, sky_mask: Array | None = None, K: Array | None = None,
