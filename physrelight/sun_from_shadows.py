@@ -46,12 +46,11 @@ from physrelight.colour import LUMINANCE, srgb_to_linear
 from physrelight.panorama import camera_rays
 from physrelight.sun_from_sky import AZIMUTH_STEP_DEG, ELEVATIONS_DEG, _camera
 
-__all__ = ["CueLikelihood", "EDGE_SIGMA_PX", "FOOT_PX", "FREE_SEGMENT_WEIGHT",
-           "GROUND_MAX_TILT_DEG", "MAX_SEGMENT_OBSERVATIONS",
-           "MERGE_GAP_FRACTION", "MIN_EDGE_STEP", "MIN_SIDE_PIXELS", "SEGMENT_OUTLIER", "SEGMENT_SIGMA_DEG",
-           "SHADING_CONTRAST_SCALE", "TOUCH_FRACTION",
-           "SHADING_MIN_ERROR", "ShadowSegment", "ground_and_casters", "shading_likelihood", "shadow_likelihood",
-           "shadow_segments"]
+__all__ = ["CueLikelihood", "EDGE_SIGMA_PX", "FOOT_PX", "FREE_SEGMENT_WEIGHT", "ground_and_casters",
+           "GROUND_MAX_TILT_DEG", "LIT_PERCENTILE", "MAX_SEGMENT_OBSERVATIONS", "MERGE_GAP_FRACTION",
+           "MIN_EDGE_STEP", "MIN_SIDE_PIXELS", "SEGMENT_OUTLIER", "SEGMENT_SIGMA_DEG",
+           "SHADING_CONTRAST_SCALE", "shading_likelihood", "SHADING_MIN_ERROR", "shadow_likelihood",
+           "shadow_segments", "ShadowSegment", "TOUCH_FRACTION"]
 
 EDGE_SIGMA_PX = 1.5
 """Gaussian smoothing (pixels) of the log luminance before Canny: a path tracer's or a sensor's noise apart."""
@@ -77,6 +76,11 @@ there, and the caster goes on down below that point."""
 CONTACT_BAND_PX = 2
 """Ground pixels this close to a non-ground, non-sky pixel are left out of the edge map: the contact line itself
 is an edge of the caster, not of its shadow."""
+LIT_PERCENTILE = 75.0
+"""The sunlit ground's log luminance is this percentile of the ground's. A segment whose dark side is not at least
+half of :data:`MIN_EDGE_STEP` below it is no shadow's edge (a box's lit top seen against the ground behind it is
+level too, and joins the ground's region in the image: their common edge is one of albedo). Where shadows cover
+more than three quarters of the ground, its edges are missed: a flat likelihood, not a wrong one."""
 SEGMENT_SIGMA_DEG = 4.0
 """Angular spread of one segment's direction about the sun's azimuth (von Mises, ``kappa = 1 / sigma^2``)."""
 SEGMENT_OUTLIER = 0.5
@@ -222,7 +226,9 @@ def ground_and_casters(normals: Array, world_to_camera_rotation: np.ndarray, sky
     Returns:
         ``(ground, casters)``, two ``(H, W)`` bool maps: ground has a world normal within
         :data:`GROUND_MAX_TILT_DEG` of up and belongs to the largest such region (or one at least a fifth of its
-        size: a box's top is level but no ground); casters are the other known, non-sky pixels.
+        size); casters are the other known, non-sky pixels. A level top seen apart from the ground (a table, a box
+        seen from below its top's height) is a caster; one whose outline touches the ground behind it in the image
+        joins the ground's region (normals alone cannot part them: :data:`LIT_PERCENTILE`).
     """
     n = _check_normals(normals, sky_mask.shape)
     length = np.linalg.norm(n, axis=-1)
@@ -322,6 +328,8 @@ def shadow_segments(image: Array, sky_mask: Array, K: Array | None = None, world
     lines = probabilistic_hough_line(edges, threshold=10, line_length=min_len, line_gap=3, theta=theta,
                                      rng=np.random.default_rng(seed))
     smooth = ndimage.gaussian_filter(filled, EDGE_SIGMA_PX)
+    # the sunlit ground's level: the upper quartile of the ground (a shadow darkens less than three quarters of it)
+    lit = float(np.percentile(smooth[inner], LIT_PERCENTILE)) if inner.any() else float("inf")
     ey, ex = np.nonzero(edges)
     big = max(shape)
     reach = max(6.0, TOUCH_FRACTION * big) + CONTACT_BAND_PX
@@ -356,6 +364,8 @@ def shadow_segments(image: Array, sky_mask: Array, K: Array | None = None, world
         step = float(np.median(np.abs(va - vb)))
         if step < 0.75 * MIN_EDGE_STEP:  # Canny's hysteresis followed a weak edge, or the ground's fill made one
             continue
+        if min(float(np.median(va)), float(np.median(vb))) > lit - 0.5 * MIN_EDGE_STEP:
+            continue  # its dark side is as bright as sunlit ground: an edge of paint, or of a caster's lit top
         sun = None
         if casters.any():
             t0 = _meets_foot(casters, p0, -t_dir, reach)
@@ -378,8 +388,11 @@ def _meets_foot(casters: np.ndarray, start: np.ndarray, direction: np.ndarray, r
     side = np.array([-direction[1], direction[0]])
     h, w = casters.shape
     first = None
-    for off in (0.0, -1.5, 1.5):  # the line and two beside it: the edge's last pixels may bend at the corner
-        pts = np.round(start[None] + t[:, None] * direction[None] + off * side[None]).astype(int)
+    # a narrow cone about the line (1.5 pixels wide at the end, widening by 0.15 per pixel): Canny places an edge
+    # a pixel or two off near a corner, and a caster's foot is a corner
+    for frac in (0.0, -0.5, 0.5, -1.0, 1.0):
+        pts = np.round(start[None] + t[:, None] * direction[None]
+                       + (frac * (1.5 + 0.15 * t))[:, None] * side[None]).astype(int)
         inside = (pts[:, 0] >= 0) & (pts[:, 0] < w) & (pts[:, 1] >= 0) & (pts[:, 1] < h)
         hit = np.nonzero(inside & casters[np.clip(pts[:, 1], 0, h - 1), np.clip(pts[:, 0], 0, w - 1)])[0]
         if len(hit) and (first is None or t[hit[0]] < first[0]):
