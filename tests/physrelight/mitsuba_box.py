@@ -30,8 +30,8 @@ def render_box(sun_elevation: float | None, sun_azimuth: float | None, *, yaw: f
                spp: int = 16, seed: int = 0) -> BoxPhoto:
     """A grey plane with a box ``size`` (half extents x, y, z) standing on it ``distance`` ahead of the camera,
     turned ``box_yaw`` degrees from the camera's heading. ``sky="constant"``: a uniform bluish sky plus a
-    directional sun (none when ``sun_elevation`` is None: an overcast light); ``sky="sunsky"``: Mitsuba's
-    Hosek-Wilkie ``sunsky`` (sky and sun) at ``turbidity``."""
+    directional sun (none when ``sun_elevation`` is None); ``sky="sunsky"``: Mitsuba's Hosek-Wilkie ``sunsky``
+    (sky and sun) at ``turbidity``; ``sky="overcast"``: the CIE overcast sky as an environment map, no sun."""
     pytest.importorskip("mitsuba", reason="Mitsuba 3 renders the reference photos (pip install mitsuba)")
     from synth.backend import load_mitsuba
 
@@ -63,6 +63,13 @@ def render_box(sun_elevation: float | None, sun_azimuth: float | None, *, yaw: f
     s = None if sun_elevation is None else direction_from_angles(sun_elevation, sun_azimuth)
     if sky == "sunsky":
         scene["sky"] = _sunsky_dict(mi, s, turbidity, 0.3)
+    elif sky == "overcast":  # the CIE overcast sky (zenith 0.5), no sun
+        from physrelight.envmap import directions
+        from physrelight.sky_model import overcast_sky
+
+        d = directions(64, 128).astype(np.float64)
+        env = 0.5 * np.where(d[..., 1:2] > 0, overcast_sky(d)[..., None], 1.0 / 3.0) * np.ones(3)
+        scene["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(env.astype(np.float32)))}
     else:
         scene["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": [0.24, 0.27, 0.33]}}
         if s is not None:
