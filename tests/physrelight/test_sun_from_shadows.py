@@ -42,13 +42,14 @@ def test_01_a_box_on_a_plane_gives_the_suns_azimuth_within_5_degrees(elevation: 
 @pytest.mark.parametrize("azimuth, side", [(100.0, "right"), (250.0, "left"), (60.0, "right"), (300.0, "left")])
 def test_02_left_against_right_facing_surfaces_pick_the_suns_side(azimuth: float, side: str) -> None:
     """The box seen corner-on: its face turned to the camera's right against the one turned left. The sun's half
-    of the azimuth circle holds at least 80 % of the likelihood."""
+    of the azimuth circle holds the most the cue gives (1 - SHADING_MIN_ERROR, less 0.02 for its soft step at the
+    halves' borders): the contrast here is large (|d| > 0.5)."""
     photo = render_box(30.0, azimuth)
     cue = sfs.shading_likelihood(photo.image, photo.normals, photo.sky_mask, photo.K, photo.world_to_camera,
                                  linear=True)
     assert cue.spoke, cue.detail
     share = _right_mass(cue) if side == "right" else 1.0 - _right_mass(cue)
-    assert share >= 0.8, (share, cue.detail)
+    assert share >= 1.0 - sfs.SHADING_MIN_ERROR - 0.02, (share, cue.detail)
 
 
 def test_03_a_sun_straight_ahead_lights_both_sides_alike_and_the_shading_cue_stays_undecided() -> None:
