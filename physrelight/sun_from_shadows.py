@@ -12,12 +12,15 @@ them to the sky's log posterior:
   ground (Canny, :func:`skimage.feature.canny`) are cut into straight segments (the probabilistic Hough transform,
   :func:`skimage.transform.probabilistic_hough_line`) and each segment, mapped to the ground, gives an axis (the
   azimuth mod 180 degrees). Which way along the axis the sun lies is not in the edge itself (a box's shadow has
-  one edge dark on its left and one dark on its right under the same sun); it is in the caster: a segment one of
-  whose ends touches a non-ground surface (a caster: the normals say which pixels are ground) points from its free
-  end to that surface, towards the sun. A segment that touches no caster keeps both directions. The edges of a
-  shadow cast by *horizontal* edges (a box's far end) lie along the caster's own edges, not the sun's: they touch
-  no caster, so they weigh less (:data:`FREE_SEGMENT_WEIGHT`) and each segment's likelihood is a mixture with a
-  uniform outlier (:data:`SEGMENT_OUTLIER`).
+  one edge dark on its left and one dark on its right under the same sun); it is in the caster: a segment whose
+  line runs, past one of its ends, into a caster's *foot* (a non-ground surface, the normals say which, met at its
+  bottom outline: :data:`FOOT_PX`) points from its free end to that foot, towards the sun, wrong with probability
+  ``sign_error`` (:data:`SIGN_ERROR`: coarse normals misplace the feet). A segment that reaches no foot keeps both
+  directions. The edges of a shadow cast by *horizontal* edges (a box's far end) lie along the caster's own edges,
+  not the sun's: they reach no foot, so they weigh less (:data:`FREE_SEGMENT_WEIGHT`), and each segment's
+  likelihood is a mixture with a uniform outlier (:data:`SEGMENT_OUTLIER`). Ground near the horizon
+  (:data:`MIN_DEPRESSION_DEG`) and edges whose dark side is as bright as sunlit ground (:data:`LIT_PERCENTILE`)
+  are not read.
 * :func:`shading_likelihood`: **surfaces facing left against surfaces facing right.** Given the normals
   (``(3, H, W)`` in the camera frame, as the decomposition gives), near-vertical surfaces facing the camera's left
   and right are compared by their median log luminance: the side the sun lights is brighter. The outcome is one
@@ -96,9 +99,9 @@ SEGMENT_OUTLIER = 0.5
 of a shadow cast by a horizontal edge (the far end of a box's shadow), which lies along the caster's edges."""
 SIGN_ERROR = 0.2
 """Share of a foot-anchored segment's von Mises put on the opposite direction: the foot may be another caster's
-(a fence's next post), or the caster a wrong one where the normals are coarse (study 59: on real crops with the
-decomposition's normals the sign was right for 2 of 6 segments whose axis was right; on path-traced boxes with true
-normals, always)."""
+(a fence's next post), or the caster a wrong one where the normals are coarse (study 59: on 32 real crops with the
+decomposition's 64-px normals the sign was right for 3 of the 8 whose axis was right; on path-traced boxes with
+exact normals, for all 22). Exact normals (a renderer's, a depth sensor's) justify ``sign_error=0``."""
 FREE_SEGMENT_WEIGHT = 0.25
 """Weight of a segment that touches no caster (it only gives an axis), against 1 for one that does."""
 MAX_SEGMENT_OBSERVATIONS = 8.0
@@ -109,9 +112,10 @@ MIN_SIDE_PIXELS = 50
 SHADING_CONTRAST_SCALE = 0.25
 """The shading cue's error rate is ``0.5 exp(-|d| / scale)`` for a difference ``d`` of median log luminance between
 the sides: a side 10 % brighter is a weak vote (error 0.34), one twice as bright as strong as the floor allows."""
-SHADING_MIN_ERROR = 0.25
-"""Floor of the shading cue's error rate: the two sides' materials may differ, whatever the contrast (study 59: on
-16 real crops of the training side with the decomposition's normals the cue picked the wrong side 5 times of 13)."""
+SHADING_MIN_ERROR = 0.4
+"""Floor of the shading cue's error rate: the two sides' materials may differ, whatever the contrast, and the
+decomposition's normals are coarse (study 59: on 32 real crops of the training side the cue picked the wrong side
+11 times of 27). On path-traced boxes it picks the right side every time: a weak vote by design."""
 _VERTICAL_MAX_TILT_DEG = 30.0  # a left/right-facing surface is within this of vertical
 _SIDE_MIN_X = 0.5  # and its camera-frame normal's x is beyond +-this
 _MIN_GROUND_SHARE = 0.2  # a level region is ground when at least this share of the largest one
@@ -160,8 +164,8 @@ class ShadowSegment:
     """A straight edge on the ground (:func:`shadow_segments`).
 
     Attributes:
-        endpoints_px: ``(2, 2)`` its ends ``(column, row)`` in pixels (pixel centres at integers + 0.5 excluded:
-            indices, as :func:`skimage.transform.probabilistic_hough_line` gives).
+        endpoints_px: ``(2, 2)`` its ends ``(column, row)`` as pixel indices (as
+            :func:`skimage.transform.probabilistic_hough_line` gives; a pixel's centre is its index + 0.5).
         axis_deg: world azimuth of its direction on the ground, in [0, 180) (the axis; the sun is at it or at it +
             180).
         sun_azimuth_deg: world azimuth from its free end to the end that touches a caster (towards the sun), or
