@@ -106,8 +106,8 @@ def estimate_sun(image: Array, sky_mask: Array, normals: Array | None = None, K:
     Returns:
         :class:`~physrelight.sun_from_sky.SunPosterior` with ``cues`` naming the cues that spoke. With a sun: the
         MAP cell of the product, its azimuth refined to 0.5 degree (the sky's own 1-degree MAP where it alone
-        decides the cell), the sky's fit (turbidity, mix, level, exponent) where the sky shows the sun, None
-        where only the shadows do. Without one: ``has_sun`` False and the reason, ending in :data:`FALLBACK`.
+        decides the cell), the sky's fit (turbidity, mix, level, exponent: fitted at the sky's own MAP sun, kept
+        as they are where the other cues move the sun) where the sky shows a sun, None where only the shadows do. Without one: ``has_sun`` False and the reason, ending in :data:`FALLBACK`.
 
     Raises:
         ValueError: as the cues' own functions, or a bad ``prior``.
