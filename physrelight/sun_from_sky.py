@@ -261,6 +261,12 @@ class SunPosterior:
         camera_yaw_deg: the camera's heading (world azimuth of its forward direction).
         sky_kind: what the sky is (:data:`SKY_KINDS`): ``"clear"`` (a sun, MAP mix 0), ``"hazy"`` (a sun, MAP mix
             above 0), ``"overcast"``, ``"night"``, ``"blown out"``, ``"none"`` (too little sky to read).
+        cues: the cues that spoke (:func:`physrelight.sun_estimate.estimate_sun`: ``"sky"``, ``"shadows"``,
+            ``"shading"``); empty from :func:`estimate_sun_from_sky` alone.
+
+    Where the sun was read from shadows or shading while the sky showed none, the sky's fit (``turbidity``,
+    ``mix``, ``level``, ``exponent``) is None: :meth:`radiance`, :meth:`sun_irradiance`, :meth:`envmap` and
+    :meth:`sh` refuse (there is no sky to draw), and :func:`lighting_preview` draws the SH it is given.
     """
 
     azimuths_deg: np.ndarray
@@ -283,6 +289,7 @@ class SunPosterior:
     camera_yaw_deg: float
     sky_kind: str = "clear"
     _cell_sr: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+    cues: tuple[str, ...] = ()
 
     def azimuth_marginal(self) -> np.ndarray:
         """``(A,)`` the posterior summed over elevation."""
@@ -322,6 +329,8 @@ class SunPosterior:
         """
         if not self.has_sun:
             raise ValueError(f"no sun was read from this sky ({self.reason}): there is no MAP sky to draw")
+        if self.level is None:
+            raise ValueError("the sun was read from shadows or shading, not from the sky: there is no MAP sky to draw")
         d = np.asarray(d, dtype=np.float64)
         hw = hosek_wilkie_sky(d, self.sun_direction, self.turbidity)
         z = float(hosek_wilkie_sky(np.array([0.0, 1.0, 0.0]), self.sun_direction, self.turbidity) @ np.array(LUMINANCE))
@@ -334,6 +343,8 @@ class SunPosterior:
         ``(1 - m) / Z`` and the level."""
         if not self.has_sun:
             raise ValueError(f"no sun was read from this sky ({self.reason})")
+        if self.level is None:
+            raise ValueError("the sun was read from shadows or shading, not from the sky: its irradiance is unknown")
         z = float(hosek_wilkie_sky(np.array([0.0, 1.0, 0.0]), self.sun_direction, self.turbidity) @ np.array(LUMINANCE))
         return (1 - self.mix) / z * sun_colour(self.elevation_deg) * self.level
 
@@ -644,7 +655,7 @@ def lighting_preview(sh_world: Array, posterior: SunPosterior | None = None, K: 
     h, w = PREVIEW_SIZE
     d = directions(h, w).astype(np.float64)
     d = np.roll(d, w // 2, axis=1)  # straight ahead in the middle
-    with_sun = posterior is not None and posterior.has_sun
+    with_sun = posterior is not None and posterior.has_sun and posterior.level is not None
     above = d[..., 1] > 0
     radiance = posterior.radiance(d) if with_sun else np.clip(np.asarray(sh.basis(d, order=2)) @ c, 0.0, None)
     lum = radiance @ np.array(LUMINANCE)
