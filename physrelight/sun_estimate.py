@@ -42,12 +42,12 @@ FALLBACK = "no sun: keep the lighting solved from the shading (the SH), as befor
 MIN_AGREEING_FEET = 2
 """Where the sky shows no sun, shadow edges make one only when at least this many reach a caster's foot and agree
 on the sun's azimuth (:attr:`physrelight.sun_from_shadows.CueLikelihood.agreeing`): one kerb line that ends at a
-building is no sun (study 59)."""
+building is no sun (study 60)."""
 MAX_TRUSTED_SIGN_ERROR = 0.05
 """Shadows alone make a sun only when their feet are trusted (``shadow_sign_error`` at most this: normals that
 outline the casters exactly). With the decomposition's coarse normals (the default sign error) they only shape the
 posterior of a sun the sky shows: on real crops of the training side, 3 of the 4 suns shadows alone made were wrong
-(study 59)."""
+(study 60)."""
 _REFINE_HALF_DEG, _REFINE_STEP_DEG = 6.0, 0.5
 
 

@@ -99,7 +99,7 @@ SEGMENT_OUTLIER = 0.5
 of a shadow cast by a horizontal edge (the far end of a box's shadow), which lies along the caster's edges."""
 SIGN_ERROR = 0.2
 """Share of a foot-anchored segment's von Mises put on the opposite direction: the foot may be another caster's
-(a fence's next post), or the caster a wrong one where the normals are coarse (study 59: on 32 real crops with the
+(a fence's next post), or the caster a wrong one where the normals are coarse (study 60: on 32 real crops with the
 decomposition's 64-px normals the sign was right for 3 of the 8 whose axis was right; on path-traced boxes with
 exact normals, for all 22). Exact normals (a renderer's, a depth sensor's) justify ``sign_error=0``."""
 FREE_SEGMENT_WEIGHT = 0.25
@@ -114,7 +114,7 @@ SHADING_CONTRAST_SCALE = 0.25
 the sides: a side 10 % brighter is a weak vote (error 0.34), one twice as bright as strong as the floor allows."""
 SHADING_MIN_ERROR = 0.4
 """Floor of the shading cue's error rate: the two sides' materials may differ, whatever the contrast, and the
-decomposition's normals are coarse (study 59: on 32 real crops of the training side the cue picked the wrong side
+decomposition's normals are coarse (study 60: on 32 real crops of the training side the cue picked the wrong side
 11 times of 27). On path-traced boxes it picks the right side every time: a weak vote by design."""
 _VERTICAL_MAX_TILT_DEG = 30.0  # a left/right-facing surface is within this of vertical
 _SIDE_MIN_X = 0.5  # and its camera-frame normal's x is beyond +-this

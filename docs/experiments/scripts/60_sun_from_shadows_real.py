@@ -1,4 +1,4 @@
-"""Study 59: the shadow and shading cues (physrelight.sun_from_shadows) and their combination with the sky and the
+"""Study 60: the shadow and shading cues (physrelight.sun_from_shadows) and their combination with the sky and the
 prior (physrelight.sun_estimate) on real photos: pinhole crops of the training side's panoramas whose sun
 envmap.split_sun finds (city 47.9 deg, forest 19.5 deg up; pm_sky is a sky over a mirror-like ground, so it is left
 out), cut looking down at the ground (pitch -25 to -5 deg) and level (pitch -8 to 8 deg, so that the sky speaks too),
@@ -7,8 +7,8 @@ out), cut looking down at the ground (pitch -25 to -5 deg) and level (pitch -8 t
 Normals are the shipped decomposition's (``Relighter.decompose_linear`` at its working resolution, bilinearly
 upsampled to the crop's); the sky mask is the panorama's reviewed one seen through the crop; the camera is known.
 
-    .venv/bin/python docs/experiments/scripts/59_sun_from_shadows_real.py \\
-        -o docs/experiments/results/59_sun_from_shadows_real.json --figure docs/images/59_sun_from_shadows_real.png
+    .venv/bin/python docs/experiments/scripts/60_sun_from_shadows_real.py \\
+        -o docs/experiments/results/60_sun_from_shadows_real.json --figure docs/images/60_sun_from_shadows_real.png
 """
 
 from __future__ import annotations
@@ -165,7 +165,7 @@ def main() -> None:
                "shading_side_right": int(sum((r["shading"]["right_share"] > 0.5) == r["shading"]["sun_on_right"]
                                              for r in rows if r["shading"]["spoke"])),
                "shading_spoke": int(sum(r["shading"]["spoke"] for r in rows))}
-    out = {"study": 59, "command": "docs/experiments/scripts/59_sun_from_shadows_real.py", "seed": args.seed,
+    out = {"study": 60, "command": "docs/experiments/scripts/60_sun_from_shadows_real.py", "seed": args.seed,
            "seconds": round(time.time() - t0, 1), "crops": rows, "rocket": rocket, "summary": summary}
     from physrelight.io import atomic_path
 
