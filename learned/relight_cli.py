@@ -230,6 +230,27 @@ def _denoise_note(image: np.ndarray) -> str | None:
             "as it is")
 
 
+@contextlib.contextmanager
+def _notes_from(logger_name: str) -> Iterator[None]:
+    """Print the INFO records of ``logger_name`` (the relighter's: where the photo's own lighting came from) on
+    stderr as ``physrelight: note: ...`` lines while the block runs."""
+    import logging
+
+    class _Note(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            print(f"physrelight: note: {record.getMessage()}", file=sys.stderr)
+
+    logger, handler = logging.getLogger(logger_name), _Note(logging.INFO)
+    level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
 def _relight(args: argparse.Namespace) -> int:
     import warnings
 
@@ -313,7 +334,7 @@ def _relight(args: argparse.Namespace) -> int:
                   seed=args.seed, sky_source=args.sky_source, exposure=exposure,
                   fov_deg=fov if fov is not None else DEFAULT_FOV_DEG, pitch_deg=args.pitch, source=source,
                   radiance=photo.radiance)
-    with warnings.catch_warnings(record=True) as caught:
+    with warnings.catch_warnings(record=True) as caught, _notes_from("learned.relighter"):
         warnings.simplefilter("always", UserWarning)
         if args.sequence:
             azimuths = args.azimuth + 360.0 * np.arange(args.sequence) / args.sequence
@@ -332,10 +353,12 @@ def _relight(args: argparse.Namespace) -> int:
     if args.layers is not None:  # the sun and sky read from the photo (physrelight lighting), before any write
         from .lighting_cli import estimate_lighting, write_lighting
 
+        # the reading and the decomposition the relighting made, not made again
         lighting = estimate_lighting(
             relighter, image, radiance=photo.radiance, sky_mask=layers["sky_mask"][..., 0] > 0.5,
             fov_deg=common["fov_deg"], pitch_deg=args.pitch,
-            fov_source="given" if args.fov is not None else "exif" if photo.fov_deg is not None else "default")
+            fov_source="given" if args.fov is not None else "exif" if photo.fov_deg is not None else "default",
+            reading=layers.sky_lighting, decomposition_lighting=layers.decomposition_lighting)
     if args.sequence:
         _write_gif(out, frames, args.fps)
         print(f"{len(frames)} frames -> {out}")
