@@ -11,7 +11,8 @@ down to) by :func:`physrelight.sun_from_sky.estimate_sun_from_sky`: a posterior 
 physical sky (Hosek-Wilkie at turbidity 2-6 mixed with the CIE overcast sky). When that posterior is informative
 (a sun, and its 90 % credible region under :data:`MAX_INFORMATIVE_AREA_SR`) the JSON's ``source`` is ``"sky"``:
 ``sun`` is the MAP sun in ``relight --sun``'s convention (azimuth clockwise from straight ahead, elevation above
-the horizon) and ``sh_camera`` the MAP sky and sun as camera-frame order-2 radiance SH. Otherwise (no sky, night,
+the horizon) and ``sh_camera`` the MAP sky and sun, over a ground that reflects them, as camera-frame order-2 radiance
+SH (:func:`learned.sky_lighting.read_sky_lighting`, what ``RelightOptions(source_estimate="sky")`` divides by). Otherwise (no sky, night,
 overcast, blown out, a sun whose place the sky does not tell) ``source`` is ``"fallback"`` with the ``reason``,
 ``sun`` is null and ``sh_camera`` is the library's own estimate (``Relighter.decompose_linear``'s lighting, what
 ``relight`` relights from). The schema is in docs/sun-from-sky.md (:data:`SCHEMA_VERSION`).
@@ -35,8 +36,10 @@ from .sky_lighting import MAX_INFORMATIVE_AREA_SR
 __all__ = ["MAX_INFORMATIVE_AREA_SR", "SCHEMA_VERSION", "add_parser", "estimate_lighting", "preview_path",
            "write_lighting"]
 
-SCHEMA_VERSION = 1
-"""The version of ``lighting.json``'s layout (docs/sun-from-sky.md): raised when a key changes meaning."""
+SCHEMA_VERSION = 2
+"""The version of ``lighting.json``'s layout (docs/sun-from-sky.md): raised when a key changes meaning (2: the
+``"sky"`` ``sh_camera`` has a ground that reflects the sky and sun, :func:`learned.sky_lighting.sky_sun_sh`; 1: a black
+ground)."""
 
 
 def preview_path(json_path: str | Path) -> Path:

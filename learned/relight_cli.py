@@ -325,7 +325,8 @@ def _relight(args: argparse.Namespace) -> int:
     from .relighter import Relighter
 
     relighter = Relighter.load(args.weights, options=RelightOptions(sky_grow=args.sky_grow,
-                                                                     denoise=DENOISE if args.denoise else None))
+                                                                     denoise=DENOISE if args.denoise else None,
+                                                                     source_estimate=args.source_estimate))
     if args.denoise:
         note = _denoise_note(image)
         if note is not None:
@@ -399,7 +400,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from physrelight.sky_mask import GROW_REACH
     from physrelight.target_lighting import SKY_TYPES
 
-    from .relight_options import RELIGHT_METHODS, SKY_SOURCES
+    from .relight_options import RELIGHT_METHODS, SKY_SOURCES, SOURCE_ESTIMATES, RelightOptions
 
     p = sub.add_parser("relight", help="relight one outdoor photo to a new lighting (shipped weights)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -437,6 +438,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="smooth the photo's noise before relighting, at a level estimated from the photo (off by "
                         "default: it also smooths fine texture such as foliage; for dark, noisy photos; "
                         "docs/experiments/37)")
+    p.add_argument("--source-estimate", choices=SOURCE_ESTIMATES, default=RelightOptions().source_estimate,
+                   help="the photo's own lighting when no --source-env/--source-sh is given: the decomposition's "
+                        "estimate, or the sun and sky read from the photo's sky (falling back to the decomposition's "
+                        "where the sky says nothing; a note says which) (default: %(default)s; "
+                        "docs/experiments/sun-in-relighter.md)")
     p.add_argument("--keep-sky", action="store_true", help="keep the photo's sky (same as --sky-source keep)")
     p.add_argument("--seed", type=int, default=0, help="SkyGAN noise seed (default: 0)")
     p.add_argument("--layers", default=None,

@@ -127,3 +127,33 @@ def test_04_the_option_is_checked_at_the_door() -> None:
     assert SOURCE_ESTIMATES == ("decomposition", "sky")
     with pytest.raises(ValueError, match="source_estimate must be one of"):
         RelightOptions(source_estimate="sun")
+
+
+def test_05_the_ground_under_the_sky_is_a_lambertian_reflector_of_it(relighter, sky_photo) -> None:
+    """``sky_sun_sh``: with a black ground it is the posterior's own ``.sh()`` exactly; the ground at albedo 0.2 adds
+    a uniform lower hemisphere of radiance ``c = 0.2 E_up / pi``, ``E_up`` the brute-force irradiance of the MAP sky
+    plus the sun on a surface facing up. Its order-2 projection, by hand: ``L00 = 2 pi Y00 c``,
+    ``L1-1 = -pi 0.488603 c`` (y is up), every other coefficient 0 (the hemisphere's symmetry); within 2 % (the
+    64 x 128 map's quadrature)."""
+    from learned.sky_lighting import read_sky_lighting, sky_sun_sh
+    from physrelight.image_input import as_image
+
+    image, sky, _ = sky_photo
+    lin, _ = as_image(image)
+    K, R = view_intrinsics(FOV, W, H), level_camera(0.0, PITCH)[:3, :3]
+    reading = read_sky_lighting(lin, torch.from_numpy(sky), K, R)
+    post = reading.posterior
+    black, sun = sky_sun_sh(post, 0.0)
+    np.testing.assert_array_equal(black, post.sh())
+    grey, sun2 = sky_sun_sh(post, 0.2)
+    np.testing.assert_array_equal(sun, sun2)
+    np.testing.assert_array_equal(reading.sh_world, grey)  # the reading's ground is GROUND_ALBEDO = 0.2
+    e_up = envmap.irradiance_reference(post.envmap(256).astype(np.float64), np.array([[0.0, 1.0, 0.0]]))[0]
+    e_up = e_up + post.sun_irradiance() * post.sun_direction[1]
+    c = 0.2 * e_up / math.pi
+    diff = grey - black
+    np.testing.assert_allclose(diff[0], 2 * math.pi * 0.282095 * c, rtol=0.02)
+    np.testing.assert_allclose(diff[1], -math.pi * 0.488603 * c, rtol=0.02)
+    assert np.abs(diff[2:]).max() < 0.02 * np.abs(diff[0]).max()
+    with pytest.raises(ValueError, match="ground_albedo"):
+        sky_sun_sh(post, 1.5)

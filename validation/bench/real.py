@@ -272,6 +272,7 @@ def _sun_figures(reading: Any, R_est: np.ndarray, crop: Any, estimates: dict[str
     sun = _panorama_sun(crop.panorama)
     post = reading.posterior
     out: dict[str, Any] = {"source": reading.source, "reason": reading.reason, "sky_kind": post.sky_kind,
+                           "posterior": {k: v for k, v in post.summary().items() if k not in ("reason", "sky_kind")},
                            "truth": None, "estimates": {}}
     R = crop.rotation
     cam = {"proposed": dominant_direction(estimates["proposed"]),
