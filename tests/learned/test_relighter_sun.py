@@ -92,16 +92,20 @@ def test_01_where_the_sky_speaks_the_quotient_divides_by_its_sun(relighter, sky_
     assert change_read < 0.6 * change_today
 
 
-def test_02_without_sky_it_falls_back_and_the_output_is_todays_to_the_byte(relighter, sky_photo) -> None:
-    """A photo with no sky pixels (the mask all False): the reading falls back with the reason, nothing is read,
-    and every layer is byte-equal to the decomposition's track."""
+def test_02_without_sky_it_falls_back_and_the_output_is_todays_to_the_byte(relighter, sky_photo, caplog) -> None:
+    """A photo with no sky pixels (the mask all False): the reading falls back with the reason (and a log line says
+    so), nothing is read, and every layer is byte-equal to the decomposition's track."""
+    import logging
+
     image, sky, _ = sky_photo
     no_sky = np.zeros_like(sky)
     ground = np.where(sky[..., None], image[::-1], image)  # the ground mirrored over the sky: no sky in the photo
     today = _relit(relighter, "decomposition", ground, no_sky)
-    fallback = _relit(relighter, "sky", ground, no_sky)
+    with caplog.at_level(logging.INFO, logger="learned.relighter"):
+        fallback = _relit(relighter, "sky", ground, no_sky)
     assert fallback.sky_lighting.source == "fallback"
     assert "too few sky pixels" in fallback.sky_lighting.reason
+    assert any("the decomposition's estimate (fallback: too few sky pixels" in r.getMessage() for r in caplog.records)
     assert set(fallback) == set(today)
     for k in today:
         np.testing.assert_array_equal(fallback[k], today[k], err_msg=k)
@@ -157,3 +161,22 @@ def test_05_the_ground_under_the_sky_is_a_lambertian_reflector_of_it(relighter, 
     assert np.abs(diff[2:]).max() < 0.02 * np.abs(diff[0]).max()
     with pytest.raises(ValueError, match="ground_albedo"):
         sky_sun_sh(post, 1.5)
+
+
+def test_06_relight_on_the_command_line_says_where_the_photos_lighting_came_from(sky_photo, tmp_path, capsys) -> None:
+    """``relight --source-estimate sky`` prints one note naming the sun read from the sky; the default
+    (``decomposition``) prints none."""
+    from physrelight import io
+    from physrelight.cli import main
+
+    image, sky, _ = sky_photo
+    photo, mask = tmp_path / "photo.png", tmp_path / "sky.png"
+    io.write_png(photo, image)
+    io.write_png(mask, sky.astype(np.float32))
+    args = [str(photo), "--mask", str(mask), "--fov", str(FOV), "--pitch", str(PITCH), "--sun", "40", "-60",
+            "--threads", "1", "--quiet"]
+    assert main(["relight", *args, "--source-estimate", "sky", "-o", str(tmp_path / "a.png")]) == 0
+    err = capsys.readouterr().err
+    assert "physrelight: note: the photo's lighting: read from its sky (sun 2" in err, err
+    assert main(["relight", *args, "-o", str(tmp_path / "b.png")]) == 0
+    assert "the photo's lighting" not in capsys.readouterr().err
