@@ -89,6 +89,37 @@ def test_02_the_ceilings_are_ceilings(quick) -> None:
     assert "after each output's best single gain" in md
 
 
+def test_02b_the_sun_section_has_every_estimate_and_falls_back_to_todays(quick) -> None:
+    """(b)'s sun: on crops with sky under a panorama's sun (the panorama's own, by ``split_sun``), the azimuth and
+    elevation errors of each estimate, median <= 90th percentile, azimuths within 0-180; where the sky's reading
+    falls back the relighter's estimate is today's (the same direction, shading error and self-relighting); the
+    report has the table."""
+    report = json.loads((quick / "real.json").read_text())
+    sunny = [c for c in report["crops"] if c["stratum"] == "sky" and c["sun"]["truth"] is not None]
+    assert {c["panorama"] for c in sunny} >= {"sunrise", "city"}
+    for c in sunny:
+        est = c["sun"]["estimates"]
+        assert set(est) == {"sky_reader", "proposed", "prior_mean"} | ({"sky_only"} if c["sun"]["source"] == "sky"
+                                                                         else set())
+        assert all(0.0 <= e["azimuth_error_deg"] <= 180.0 and e["elevation_error_deg"] >= 0.0 for e in est.values())
+        if c["sun"]["source"] == "fallback":
+            assert est["sky_reader"] == est["proposed"]
+            assert c["lighting"]["sky_reader"] == c["lighting"]["proposed"]
+            assert c["self"]["quotient_sky"] == c["self"]["quotient"]
+        else:
+            assert est["sky_reader"] == est["sky_only"]
+    for g in ("heldout", "training"):
+        sun = report["summary"][g]["sun"]
+        assert sun["crops_with_sun"] == sum(c["panorama"] in report["summary"][g]["panoramas"] for c in sunny)
+        from validation.bench.real_metrics import SUN_ESTIMATES
+
+        for e in SUN_ESTIMATES:
+            x = sun[e]
+            if x is not None:
+                assert x["azimuth_error_deg"]["median"] <= x["azimuth_error_deg"]["p90"]
+    assert "### The sun's position" in (quick / "real.md").read_text()
+
+
 def test_03_shading_error_is_scale_invariant_and_sees_direction() -> None:
     n = sh.fibonacci_sphere(128)
     L = np.zeros((9, 3))

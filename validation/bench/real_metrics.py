@@ -29,7 +29,7 @@ SUN_ESTIMATES = ("sky_reader", "sky_only", "proposed", "prior_mean")
 """The sun's position from: the sky's posterior's MAP where it is informative, else the decomposition's
 (``sky_reader``, what the relighter uses); the sky's MAP on the crops where it is informative only (``sky_only``);
 the dominant direction of the decomposition's order-2 lighting (``proposed``, today's estimate); the dominant
-direction of the lighting prior's mean (``prior_mean``: a fixed guess in the camera's frame, 87.5 deg up)."""
+direction of the lighting prior's mean (``prior_mean``: a fixed guess in the camera's frame, 2.3 deg from its up axis)."""
 GROUND_ALBEDOS = (0.0, 0.1, 0.2, 0.3)
 """The ground reflectances tried below the sky's reading (``learned.sky_lighting.sky_sun_sh``) on the crops it reads."""
 BOUNDARY_TOLERANCE = 2.0

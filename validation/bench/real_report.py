@@ -214,7 +214,7 @@ def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
               "where it is informative, else `proposed`'s: what `RelightOptions(source_estimate=\"sky\")` uses; "
               "`sky_only`: the same on the crops it reads only; `proposed`: the dominant direction (luminance band "
               "1) of the decomposition's order-2 lighting, today's estimate; `prior_mean`: that of the lighting "
-              "prior's mean, a fixed guess (87.5 deg up, in the camera's frame). Absolute errors in degrees, median "
+              "prior's mean, a fixed guess (2.3 deg from the camera's up axis). Absolute errors in degrees, median "
               "/ 90th percentile (crops):", ""]
     sun_groups = [g for g in groups if s[g].get("sun", {}).get("crops_with_sun")]
     lines += ["| estimate | " + " | ".join(f"{GROUP_TITLES[g]}: azimuth | elevation" for g in sun_groups) + " |",
