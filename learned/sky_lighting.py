@@ -106,7 +106,7 @@ def read_sky_lighting(lin: torch.Tensor, sky: torch.Tensor, K: Any, world_to_cam
     Args:
         lin: ``(1, 3, H, W)`` the photo as the relighter has it: display values sRGB-decoded, or with ``radiance``
             a radiance photo at its display-like level (:func:`physrelight.image_input.as_radiance`).
-        sky: ``(1, 1, H, W)`` or ``(H, W)`` bool, True on sky.
+        sky: ``(1, 1, H, W)`` or ``(H, W)`` bool (torch or numpy), True on sky.
         K: ``(3, 3)`` intrinsics; ``world_to_camera``: ``(3, 3)`` or ``(4, 4)`` (the camera ``relight`` uses:
             :func:`physrelight.horizon.photo_camera`).
         radiance: ``lin`` is radiance: read as linear, with no night check and no clipping.
@@ -119,13 +119,15 @@ def read_sky_lighting(lin: torch.Tensor, sky: torch.Tensor, K: Any, world_to_cam
 
     if lin.ndim != 4 or lin.shape[:2] != (1, 3):
         raise ValueError(f"lin must have shape (1, 3, H, W), got {tuple(lin.shape)}")
+    sky = torch.as_tensor(sky)
     mask = sky.reshape(lin.shape[-2:]) if sky.numel() == lin.shape[-2] * lin.shape[-1] else None
-    if mask is None:
-        raise ValueError(f"sky must have the photo's size {tuple(lin.shape[-2:])}, got {tuple(sky.shape)}")
+    if mask is None or sky.dtype != torch.bool:
+        raise ValueError(f"sky must be a boolean mask of the photo's size {tuple(lin.shape[-2:])}, got "
+                         f"{tuple(sky.shape)} {sky.dtype}")
     # a display photo is read as display values (its clipping and its night check are in those), the sRGB-decoded
     # linear values encoded again
     photo = lin[0] if radiance else colour.to_ldr(lin[0].clamp_min(0.0))
-    post = estimate_sun_from_sky(photo.permute(1, 2, 0).double().numpy(), mask.bool().numpy(), K, world_to_camera,
+    post = estimate_sun_from_sky(photo.permute(1, 2, 0).double().numpy(), mask.numpy(), K, world_to_camera,
                                  linear=radiance)
     if post.has_sun and post.credible_area_sr <= MAX_INFORMATIVE_AREA_SR:
         sh_world, sun_world = sky_sun_sh(post)

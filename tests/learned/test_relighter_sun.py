@@ -133,6 +133,25 @@ def test_04_the_option_is_checked_at_the_door() -> None:
         RelightOptions(source_estimate="sun")
 
 
+def test_04b_the_reading_refuses_bad_input_by_name() -> None:
+    """``read_sky_lighting``: a photo that is not ``(1, 3, H, W)``, a mask of another size or not boolean; and a
+    fallback has no lighting to turn into a camera."""
+    from learned.sky_lighting import read_sky_lighting
+
+    K, R = view_intrinsics(FOV, 16, 12), level_camera(0.0, PITCH)[:3, :3]
+    lin = torch.full((1, 3, 12, 16), 0.2)
+    with pytest.raises(ValueError, match="lin must have shape"):
+        read_sky_lighting(lin[0], torch.ones(12, 16, dtype=torch.bool), K, R)
+    with pytest.raises(ValueError, match="boolean mask of the photo's size"):
+        read_sky_lighting(lin, torch.ones(12, 15, dtype=torch.bool), K, R)
+    with pytest.raises(ValueError, match="boolean mask of the photo's size"):
+        read_sky_lighting(lin, np.ones((12, 16)), K, R)
+    reading = read_sky_lighting(lin, np.zeros((12, 16), bool), K, R)
+    assert reading.source == "fallback" and reading.sh_world is None
+    with pytest.raises(ValueError, match="the sky was not read"):
+        reading.camera(R)
+
+
 def test_05_the_ground_under_the_sky_is_a_lambertian_reflector_of_it(relighter, sky_photo) -> None:
     """``sky_sun_sh``: with a black ground it is the posterior's own ``.sh()`` exactly; the ground at albedo 0.2 adds
     a uniform lower hemisphere of radiance ``c = 0.2 E_up / pi``, ``E_up`` the brute-force irradiance of the MAP sky
