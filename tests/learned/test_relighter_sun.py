@@ -199,3 +199,39 @@ def test_06_relight_on_the_command_line_says_where_the_photos_lighting_came_from
     assert "physrelight: note: the photo's lighting: read from its sky (sun 2" in err, err
     assert main(["relight", *args, "-o", str(tmp_path / "b.png")]) == 0
     assert "the photo's lighting" not in capsys.readouterr().err
+
+
+def test_07_relight_layers_decomposes_once_when_the_sky_falls_back(sky_photo, tmp_path, capsys, monkeypatch) -> None:
+    """``relight --layers`` with a sky too small to read (100 pixels < ``MIN_SKY_PIXELS``): ``lighting.json`` falls
+    back to the decomposition's lighting, the one the relighting made: ``decompose_linear`` runs once, not twice."""
+    import json
+
+    from learned.relighter import Relighter
+    from physrelight import io
+    from physrelight.cli import main
+
+    image, _, _ = sky_photo
+    small_sky = np.zeros((H, W), bool)
+    small_sky[:10, :10] = True
+    photo, mask = tmp_path / "photo.png", tmp_path / "small_sky_mask.png"
+    io.write_png(photo, image)
+    io.write_png(mask, small_sky.astype(np.float32))
+    calls = []
+    original = Relighter.decompose_linear
+
+    def counted(self, *a, **k):
+        calls.append(1)
+        return original(self, *a, **k)
+
+    monkeypatch.setattr(Relighter, "decompose_linear", counted)
+    for option in ("decomposition", "sky"):
+        calls.clear()
+        d = tmp_path / option
+        assert main(["relight", str(photo), "--mask", str(mask), "--fov", str(FOV), "--pitch", str(PITCH), "--sun",
+                     "40", "-60", "--layers", str(d), "--source-estimate", option, "--threads", "1", "--quiet",
+                     "-o", str(tmp_path / f"{option}.png")]) == 0
+        rec = json.loads((d / "lighting.json").read_text())
+        assert rec["source"] == "fallback" and "too few sky pixels" in rec["reason"]
+        assert len(calls) == 1, option
+    capsys.readouterr()
+    assert (tmp_path / "decomposition" / "lighting.json").read_bytes() == (tmp_path / "sky" / "lighting.json").read_bytes()
