@@ -11,7 +11,8 @@ down to) by :func:`physrelight.sun_from_sky.estimate_sun_from_sky`: a posterior 
 physical sky (Hosek-Wilkie at turbidity 2-6 mixed with the CIE overcast sky). When that posterior is informative
 (a sun, and its 90 % credible region under :data:`MAX_INFORMATIVE_AREA_SR`) the JSON's ``source`` is ``"sky"``:
 ``sun`` is the MAP sun in ``relight --sun``'s convention (azimuth clockwise from straight ahead, elevation above
-the horizon) and ``sh_camera`` the MAP sky and sun as camera-frame order-2 radiance SH. Otherwise (no sky, night,
+the horizon) and ``sh_camera`` the MAP sky and sun, over a ground that reflects them, as camera-frame order-2 radiance
+SH (:func:`learned.sky_lighting.read_sky_lighting`, what ``RelightOptions(source_estimate="sky")`` divides by). Otherwise (no sky, night,
 overcast, blown out, a sun whose place the sky does not tell) ``source`` is ``"fallback"`` with the ``reason``,
 ``sun`` is null and ``sh_camera`` is the library's own estimate (``Relighter.decompose_linear``'s lighting, what
 ``relight`` relights from). The schema is in docs/sun-from-sky.md (:data:`SCHEMA_VERSION`).
@@ -24,22 +25,21 @@ yellow (:func:`physrelight.sun_from_sky.lighting_preview`).
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .sky_lighting import MAX_INFORMATIVE_AREA_SR
+
 __all__ = ["MAX_INFORMATIVE_AREA_SR", "SCHEMA_VERSION", "add_parser", "estimate_lighting", "preview_path",
            "write_lighting"]
 
-SCHEMA_VERSION = 1
-"""The version of ``lighting.json``'s layout (docs/sun-from-sky.md): raised when a key changes meaning."""
-MAX_INFORMATIVE_AREA_SR = math.pi
-"""A posterior with a sun whose 90 % credible region is wider than this (a quarter of the sphere, half the sky)
-says there is a sun but not where: the JSON falls back to the library's estimate (the flat prior's region is
-5.45 sr; the training panoramas' forest crops, 2-31 % sky among trees, give 2-5.4 sr)."""
+SCHEMA_VERSION = 2
+"""The version of ``lighting.json``'s layout (docs/sun-from-sky.md): raised when a key changes meaning (2: the
+``"sky"`` ``sh_camera`` has a ground that reflects the sky and sun, :func:`learned.sky_lighting.sky_sun_sh`; 1: a black
+ground)."""
 
 
 def preview_path(json_path: str | Path) -> Path:
@@ -49,8 +49,8 @@ def preview_path(json_path: str | Path) -> Path:
 
 
 def estimate_lighting(relighter: Any, image: np.ndarray, *, radiance: bool = False, sky_mask: np.ndarray | None = None,
-                      fov_deg: float, fov_source: str, pitch_deg: float | None = None
-                      ) -> tuple[dict[str, Any], np.ndarray]:
+                      fov_deg: float, fov_source: str, pitch_deg: float | None = None, reading: Any = None,
+                      decomposition_lighting: np.ndarray | None = None) -> tuple[dict[str, Any], np.ndarray]:
     """The lighting of one photo as ``lighting.json``'s dict, and its preview ``(128, 256, 3)`` uint8.
 
     Args:
@@ -62,6 +62,9 @@ def estimate_lighting(relighter: Any, image: np.ndarray, *, radiance: bool = Fal
             ``"default"``).
         pitch_deg: the camera's pitch (up positive), or None: estimated from the sky's horizon
             (:func:`physrelight.horizon.estimate_pitch`, as ``relight`` does).
+        reading, decomposition_lighting: what a relighting of this very photo, mask and camera already has
+            (:class:`learned.relighter.RelitLayers`): the sky's reading (:class:`learned.sky_lighting.SkyLighting`)
+            and the decomposition's camera-frame lighting ``(9, 3)``; each None: made here.
     """
     import torch
 
@@ -70,7 +73,9 @@ def estimate_lighting(relighter: Any, image: np.ndarray, *, radiance: bool = Fal
     from physrelight.horizon import estimate_pitch
     from physrelight.image_input import as_image, as_radiance
     from physrelight.panorama import level_camera, view_intrinsics
-    from physrelight.sun_from_sky import estimate_sun_from_sky, lighting_preview
+    from physrelight.sun_from_sky import lighting_preview
+
+    from .sky_lighting import read_sky_lighting
 
     if fov_source not in ("exif", "given", "default"):
         raise ValueError(f"fov_source must be 'exif', 'given' or 'default', got {fov_source!r}")
@@ -84,28 +89,26 @@ def estimate_lighting(relighter: Any, image: np.ndarray, *, radiance: bool = Fal
     K = view_intrinsics(float(fov_deg), w, h)
     pitch = float(pitch_deg) if pitch_deg is not None else estimate_pitch(sky[0, 0], K)
     R = level_camera(0.0, pitch)[:3, :3]
-    # the sky is read in the same linear units as the decomposition: display values sRGB-decoded, or the
-    # radiance at the display-like level relight uses
-    photo = lin[0].permute(1, 2, 0).numpy() if radiance else np.asarray(image, dtype=np.float64)
-    post = estimate_sun_from_sky(photo, sky[0, 0].numpy(), pitch_deg=pitch, fov_deg=float(fov_deg), linear=radiance)
+    # the sky is read as relight reads it (learned.sky_lighting): the same function, photo, mask and camera
+    if reading is None:
+        reading = read_sky_lighting(lin, sky, K, R, radiance=radiance)
+    post = reading.posterior
     summary = post.summary()
-    if post.has_sun and post.credible_area_sr <= MAX_INFORMATIVE_AREA_SR:
-        source, reason = "sky", ""
-        sh_world = post.sh()
+    source = reading.source
+    if source == "sky":
+        reason = ""
+        sh_world = reading.sh_world
         sh_camera = np.asarray(sh.rotation(R, order=2)) @ sh_world
     else:
-        source = "fallback"
-        if post.has_sun:
-            reason = (f"the sky shows a sun but not where: its 90 % credible region is {post.credible_area_sr:.2f} sr "
-                      f"> {MAX_INFORMATIVE_AREA_SR:.2f} sr")
-        else:
-            reason = post.reason + (f" ({why})" if why else "")
+        reason = reading.reason + (f" ({why})" if why and not post.has_sun else "")
         small, small_sky = working_resolution(lin, sky, relighter.res)
         if bool(small_sky.all()):
             raise ValueError(f"the whole photo is sky and it tells no sun ({reason}): there is no scene to estimate "
                              "the lighting from")
-        with torch.no_grad():  # the library's own estimate, what relight relights from: (9, 3) camera frame
-            estimate = relighter.decompose_linear(small, small_sky)["lighting"][0].double().numpy()
+        if decomposition_lighting is None:
+            with torch.no_grad():  # the library's own estimate, what relight relights from: (9, 3) camera frame
+                decomposition_lighting = relighter.decompose_linear(small, small_sky)["lighting"][0].double().numpy()
+        estimate = np.asarray(decomposition_lighting, dtype=np.float64)
         sh_camera = estimate
         sh_world = np.asarray(sh.rotation(R.T, order=2)) @ estimate
         summary["sun"] = None

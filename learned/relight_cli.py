@@ -230,6 +230,27 @@ def _denoise_note(image: np.ndarray) -> str | None:
             "as it is")
 
 
+@contextlib.contextmanager
+def _notes_from(logger_name: str) -> Iterator[None]:
+    """Print the INFO records of ``logger_name`` (the relighter's: where the photo's own lighting came from) on
+    stderr as ``physrelight: note: ...`` lines while the block runs."""
+    import logging
+
+    class _Note(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            print(f"physrelight: note: {record.getMessage()}", file=sys.stderr)
+
+    logger, handler = logging.getLogger(logger_name), _Note(logging.INFO)
+    level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
 def _relight(args: argparse.Namespace) -> int:
     import warnings
 
@@ -304,7 +325,8 @@ def _relight(args: argparse.Namespace) -> int:
     from .relighter import Relighter
 
     relighter = Relighter.load(args.weights, options=RelightOptions(sky_grow=args.sky_grow,
-                                                                     denoise=DENOISE if args.denoise else None))
+                                                                     denoise=DENOISE if args.denoise else None,
+                                                                     source_estimate=args.source_estimate))
     if args.denoise:
         note = _denoise_note(image)
         if note is not None:
@@ -313,7 +335,7 @@ def _relight(args: argparse.Namespace) -> int:
                   seed=args.seed, sky_source=args.sky_source, exposure=exposure,
                   fov_deg=fov if fov is not None else DEFAULT_FOV_DEG, pitch_deg=args.pitch, source=source,
                   radiance=photo.radiance)
-    with warnings.catch_warnings(record=True) as caught:
+    with warnings.catch_warnings(record=True) as caught, _notes_from("learned.relighter"):
         warnings.simplefilter("always", UserWarning)
         if args.sequence:
             azimuths = args.azimuth + 360.0 * np.arange(args.sequence) / args.sequence
@@ -332,10 +354,12 @@ def _relight(args: argparse.Namespace) -> int:
     if args.layers is not None:  # the sun and sky read from the photo (physrelight lighting), before any write
         from .lighting_cli import estimate_lighting, write_lighting
 
+        # the reading and the decomposition the relighting made, not made again
         lighting = estimate_lighting(
             relighter, image, radiance=photo.radiance, sky_mask=layers["sky_mask"][..., 0] > 0.5,
             fov_deg=common["fov_deg"], pitch_deg=args.pitch,
-            fov_source="given" if args.fov is not None else "exif" if photo.fov_deg is not None else "default")
+            fov_source="given" if args.fov is not None else "exif" if photo.fov_deg is not None else "default",
+            reading=layers.sky_lighting, decomposition_lighting=layers.decomposition_lighting)
     if args.sequence:
         _write_gif(out, frames, args.fps)
         print(f"{len(frames)} frames -> {out}")
@@ -376,7 +400,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from physrelight.sky_mask import GROW_REACH
     from physrelight.target_lighting import SKY_TYPES
 
-    from .relight_options import RELIGHT_METHODS, SKY_SOURCES
+    from .relight_options import RELIGHT_METHODS, SKY_SOURCES, SOURCE_ESTIMATES, RelightOptions
 
     p = sub.add_parser("relight", help="relight one outdoor photo to a new lighting (shipped weights)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -414,6 +438,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="smooth the photo's noise before relighting, at a level estimated from the photo (off by "
                         "default: it also smooths fine texture such as foliage; for dark, noisy photos; "
                         "docs/experiments/37)")
+    p.add_argument("--source-estimate", choices=SOURCE_ESTIMATES, default=RelightOptions().source_estimate,
+                   help="the photo's own lighting when no --source-env/--source-sh is given: the decomposition's "
+                        "estimate, or the sun and sky read from the photo's sky (falling back to the decomposition's "
+                        "where the sky says nothing; a note says which) (default: %(default)s; "
+                        "docs/experiments/61-sun-in-relighter.md)")
     p.add_argument("--keep-sky", action="store_true", help="keep the photo's sky (same as --sky-source keep)")
     p.add_argument("--seed", type=int, default=0, help="SkyGAN noise seed (default: 0)")
     p.add_argument("--layers", default=None,

@@ -17,7 +17,7 @@ from physrelight.sky_mask import GROW_REACH
 from .source_lighting import SourceLightingConfig
 
 __all__ = ["DEFAULT_FOV_DEG", "DEFAULT_METHOD", "DENOISE", "LIGHTING_ESTIMATORS", "RELIGHT_METHODS", "SKY_LEVELS",
-           "SKY_SOURCES", "RelightOptions", "RelightRequest"]
+           "SKY_SOURCES", "SOURCE_ESTIMATES", "RelightOptions", "RelightRequest"]
 
 DEFAULT_METHOD = "proposed"
 """The method of ``relight`` and the command line unless told: the shipped renderer on top of the quotient
@@ -39,6 +39,8 @@ data/val5 by study 37's rule; not the default (docs/experiments/37-denoise-befor
 
 SKY_LEVELS = ("grey_world", "decomposition")
 """The levels a rendered sky can be put at (:attr:`RelightOptions.sky_level`)."""
+SOURCE_ESTIMATES = ("decomposition", "sky")
+"""What the estimated track takes as the photo's own lighting (:attr:`RelightOptions.source_estimate`)."""
 
 
 @dataclass(frozen=True)
@@ -78,6 +80,17 @@ class RelightOptions:
             says how much light falls on the visible surfaces; so does the photo's brightness under a middle-grey
             albedo. The level used is the geometric blend: exponent 0 (the default), the shape alone; 1, the grey
             world alone (:func:`learned.source_lighting.grey_world_level`; study 39).
+        source_estimate: the photo's own lighting on the estimated track (:data:`SOURCE_ESTIMATES`):
+            ``"decomposition"``, the decomposition's order-2 estimate (the figures before issue 44); ``"sky"``, the sun
+            and sky read from the photo's sky through its camera (:func:`learned.sky_lighting.read_sky_lighting`: the
+            posterior's MAP sky, sun and a ground, as order-2 SH at the decomposition's level; the quotient shades
+            its sun by the exact cosine when the target's sun is too), falling back to the decomposition's where the
+            sky says nothing (no sky, night, overcast, blown out, a sun it does not place). The default stays
+            ``"decomposition"``, chosen on the training panoramas' crops (bench --real --full's 118 training crops
+            with sky: self-relighting ``quotient`` 22.83 dB today, 21.70 dB with ``"sky"``; the sky reads 33 of
+            them, and its misread suns, on dawn, night and hazy skies, cost more than its right ones gain) and on
+            bench --quick's synthetic pairs (``proposed`` l1 0.1194 today, 0.1297 with ``"sky"``);
+            docs/experiments/61-sun-in-relighter.md.
 
     Raises:
         ValueError: an option out of its range, named.
@@ -92,6 +105,7 @@ class RelightOptions:
     renderer_gain_ratio: bool = False
     denoise: tuple[int, float] | None = None
     level_prior: float = 0.0
+    source_estimate: str = "decomposition"
 
     def __post_init__(self) -> None:
         def number(x: Any) -> bool:
@@ -117,6 +131,8 @@ class RelightOptions:
             raise ValueError(f"denoise must be None or a (radius, strength) pair, got {self.denoise!r}")
         if not number(self.level_prior) or not 0.0 <= self.level_prior <= 1.0:
             raise ValueError(f"level_prior must lie in [0, 1], got {self.level_prior!r}")
+        if self.source_estimate not in SOURCE_ESTIMATES:
+            raise ValueError(f"source_estimate must be one of {SOURCE_ESTIMATES}, got {self.source_estimate!r}")
         object.__setattr__(self, "ratio_radius", int(self.ratio_radius))
 
 

@@ -26,6 +26,7 @@ azimuth_deg)`` (``relight --sun``'s angles), world frame (Y up), rotated into th
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 from collections.abc import Callable
@@ -52,7 +53,7 @@ from .objectives import decompose_and_solve
 from .relight_options import DEFAULT_METHOD, RELIGHT_METHODS, SKY_SOURCES, RelightOptions, RelightRequest
 from .source_lighting import grey_world_level, solve_source_lighting
 
-__all__ = ["RELIGHT_STAGES", "WEIGHT_FILES", "Relighter", "fill_weights_folder"]
+__all__ = ["RELIGHT_STAGES", "WEIGHT_FILES", "RelitLayers", "Relighter", "fill_weights_folder"]
 
 RELIGHT_STAGES = ("sky mask", "relighting", "sky", "layers")
 """The stages of one relighting, in order, as ``Relighter.on_stage`` is told them: the full-resolution sky mask
@@ -85,7 +86,29 @@ def fill_weights_folder(dest: str | os.PathLike, source: str | os.PathLike | Non
     return copied
 
 
+_log = logging.getLogger(__name__)
 _OPTION_NAMES = frozenset(f.name for f in dataclasses.fields(RelightOptions))
+
+
+class RelitLayers(dict):
+    """:meth:`Relighter.relight_layers`'s layers (name -> ``(H, W, C)`` array) and what the photo's own lighting was
+    taken to be, for ``lighting.json``.
+
+    Attributes:
+        sky_lighting: the sky's reading (:class:`learned.sky_lighting.SkyLighting`) when the estimated track read it
+            (:attr:`RelightOptions.source_estimate` ``"sky"``), else None.
+        decomposition_lighting: ``(9, 3)`` the decomposition's camera-frame lighting at the working resolution.
+        source_lighting: ``(9, 3)`` the camera-frame lighting the relighting took as the photo's (the quotient's
+            divisor, in the decomposition's units): the sky's reading at the decomposition's level, else
+            ``decomposition_lighting``.
+        K, world_to_camera: the camera the photo was relit through.
+    """
+
+    sky_lighting: Any = None
+    decomposition_lighting: np.ndarray | None = None
+    source_lighting: np.ndarray | None = None
+    K: Any = None
+    world_to_camera: Any = None
 
 
 class Relighter:
@@ -215,7 +238,8 @@ class Relighter:
                        source_lighting: torch.Tensor | None = None, method: str = DEFAULT_METHOD,
                        decomposition: dict[str, torch.Tensor] | None = None,
                        known_source: bool = False, *, target_sun: torch.Tensor | None = None,
-                       source_sun: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+                       source_sun: torch.Tensor | None = None, read_source: torch.Tensor | None = None,
+                       read_source_sun: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """Relight linear images to a camera-frame SH target; tensors in, tensors out.
 
         Args:
@@ -250,11 +274,18 @@ class Relighter:
                 then shade the sun by its exact clamped cosine and the rest by SH
                 (:func:`physrelight.quotient.quotient_ratio` ``sun_cosine``); ``source_sun`` is read
                 on the known track only (on the estimated one the source is the decomposition's SH).
+            read_source, read_source_sun: ``(B, 9, 3)`` or ``(9, 3)`` camera-frame radiance SH of the photo's own
+                lighting read from elsewhere (its sky: :func:`learned.sky_lighting.read_sky_lighting`, any level) and
+                its sun's part, or None. On the estimated track it stands for the decomposition's lighting, put at
+                that lighting's level (DC luminance): the quotient divides by it (its sun by the exact cosine when
+                ``target_sun`` is given), the renderer is given it. Ignored on the known track.
 
         Returns:
             ``relit (B, 3, H, W)`` linear, sky pixels equal to ``image``; ``target (B, 9, 3)`` in
             the decomposition's units; ``target_shadow (B, 1, H, W)`` (ones for ``lambertian_sh``);
-            the decomposition's ``albedo``, ``normals``, ``shadow``, ``lighting``, ``foreground``.
+            the decomposition's ``albedo``, ``normals``, ``shadow``, ``lighting``, ``foreground``; ``source
+            (B, 9, 3)`` the source lighting the estimated track used (``read_source`` at the decomposition's
+            level, else the decomposition's ``lighting``).
         """
         if method not in RELIGHT_METHODS:
             raise ValueError(f"method must be one of {RELIGHT_METHODS}, got {method!r}")
@@ -273,22 +304,37 @@ class Relighter:
         if known_source and not (method.startswith("quotient") or quotient_based):
             raise ValueError(f"known_source is a track of the quotient methods and of a quotient-based renderer, "
                              f"not of {method!r}")
-        scale = exposure_scale(tgt, out["lighting"], source, fallback=self.prior.mean.reshape(1, 9, 3))[:, None, None]
+        estimate, estimate_sun = out["lighting"], None
+        if read_source is not None and not known_source:
+            # the shape read from the sky at the decomposition's level: the albedo's scale and every level
+            # downstream (the target's, the grey world's) stay the decomposition's
+            read = as_lighting_batch(read_source, b, "read_source").to(estimate.dtype)
+            prior_level = dc_luminance(self.prior.mean.reshape(1, 9, 3).to(estimate.dtype))
+            level = dc_luminance(estimate)
+            level = torch.where(level > 1e-6 * prior_level, level, prior_level)
+            k = (level / dc_luminance(read).clamp_min(torch.finfo(read.dtype).tiny))[:, None, None]
+            estimate = read * k
+            if read_source_sun is not None:
+                estimate_sun = as_lighting_batch(read_source_sun, b, "read_source_sun").to(estimate.dtype) * k
+        est_out = out if estimate is out["lighting"] else {**out, "lighting": estimate}
+        scale = exposure_scale(tgt, estimate, source, fallback=self.prior.mean.reshape(1, 9, 3))[:, None, None]
         if source is not None and not known_source and self.options.level_prior:
-            scale = scale / self.grey_world_gain(image, sky, out, scale) ** self.options.level_prior
+            scale = scale / self.grey_world_gain(image, sky, est_out, scale) ** self.options.level_prior
         tgt = tgt * scale
         if method == "lambertian_sh" or method == "quotient":
             s = torch.ones_like(out["shadow"])
         else:
             s = repair_top_rows(self.shadow_net(out["normals"], tgt))
         if method in ("quotient", "quotient_shadownet") or quotient_based:
-            src = source * scale if known_source else out["lighting"]
+            src = source * scale if known_source else estimate
             src_shadow = out["shadow"] if method == "quotient_shadownet" else None
             t_sun = None if target_sun is None else as_lighting_batch(target_sun, b, "target_sun") * scale
             s_sun = None
             if known_source and t_sun is not None:
                 s_sun = (torch.zeros_like(src) if source_sun is None
                          else as_lighting_batch(source_sun, b, "source_sun") * scale)
+            elif t_sun is not None and estimate_sun is not None:  # the sun read from the sky: its exact cosine too
+                s_sun = estimate_sun
             relit = quotient_relight(image.float(), out["normals"], src, tgt, mask=~sky, source_shadow=src_shadow,
                                      target_shadow=s if method == "quotient_shadownet" else None,
                                      source_sun=s_sun, target_sun=t_sun, sun_cosine=t_sun is not None,
@@ -301,7 +347,7 @@ class Relighter:
             img, fg = image.float(), ~sky.bool()
             q_src = quotient_relight(img, out["normals"], src, src, mask=fg, smooth_radius=self.options.ratio_radius)
             s_src = repair_top_rows(self.shadow_net(out["normals"], src))
-            args = (img, sky.bool(), out["albedo"], out["normals"], out["shadow"], out["lighting"])
+            args = (img, sky.bool(), out["albedo"], out["normals"], out["shadow"], estimate)
             g_t = self.renderer.gain(renderer_inputs(*args, tgt, s, relit))
             g_s = self.renderer.gain(renderer_inputs(*args, src, s_src, q_src))
             relit = torch.where(sky, img, positive(relit * g_t / g_s))
@@ -309,12 +355,12 @@ class Relighter:
             from .neural_renderer import render_relit
 
             # a quotient-based renderer is a learned gain on the quotient image just computed
-            relit = render_relit(self.renderer, image.float(), sky.bool(), out, tgt, s,
+            relit = render_relit(self.renderer, image.float(), sky.bool(), est_out, tgt, s,
                                  quotient=relit if quotient_based else None)
         elif method not in ("quotient", "quotient_shadownet"):
             relit = image_model.render(out["albedo"], out["normals"], tgt, s)
         relit = torch.where(sky, image.float(), relit.clamp_min(0))
-        return {"relit": relit, "target": tgt, "target_shadow": s, **{k: out[k] for k in (
+        return {"relit": relit, "target": tgt, "target_shadow": s, "source": estimate, **{k: out[k] for k in (
             "albedo", "normals", "shadow", "lighting", "foreground")}}
 
     @staticmethod
@@ -361,7 +407,8 @@ class Relighter:
 
         Args:
             image: ``(B, 3, H, W)`` linear; sky ``(B, 1, H, W)`` bool; target, source_lighting,
-                method, known_source, ``target_sun=``, ``source_sun=``: as for :meth:`relight_linear`.
+                method, known_source, ``target_sun=``, ``source_sun=``, ``read_source=``, ``read_source_sun=``: as for
+                :meth:`relight_linear`.
             decomposition: the ``"working"`` dict of an earlier call on the same image and sky at the
                 same working resolution (its decomposition is reused), or None.
             denoised: :meth:`denoised` of this very ``image``, when the caller has it (a sequence of
@@ -426,7 +473,7 @@ class Relighter:
         lin, kind, gain = as_radiance(image) if radiance else (*as_image(image), 1.0)
         reqs = [req if lin.shape[0] == 1 else dataclasses.replace(
             req, sky_mask=None if sky_mask is None else as_mask(sky_mask, lin)[b: b + 1]) for b in range(lin.shape[0])]
-        frames = [self._relight_tensors(lin[b: b + 1], target, reqs[b], layers=False)["relit"]
+        frames = [self._relight_tensors(lin[b: b + 1], target, reqs[b], layers=False, radiance=radiance)["relit"]
                   for b in range(lin.shape[0])]
         return give_back(torch.cat(frames) / gain if req.linear else torch.cat(frames), kind)
 
@@ -449,7 +496,7 @@ class Relighter:
         reuse: dict[str, Any] = {}
         azimuths = np.asarray(azimuths_deg, dtype=np.float64).ravel()
         frames = (self._relight_tensors(lin, target, dataclasses.replace(req, azimuth_deg=float(a)), layers=False,
-                                        reuse=reuse)["relit"]
+                                        reuse=reuse, radiance=radiance)["relit"]
                   for a in tqdm(azimuths, desc="relight", disable=not progress))
         return [give_back(f / gain if req.linear else f, kind) for f in frames]
 
@@ -481,18 +528,24 @@ class Relighter:
                 ``linear``).
 
         Returns:
-            numpy ``(H, W, C)`` display values in [0, 1]: ``relit``, ``albedo``, ``normals``
+            :class:`RelitLayers`, numpy ``(H, W, C)`` display values in [0, 1]: ``relit``, ``albedo``, ``normals``
             (``0.5 * n + 0.5``), ``shadow`` (source), ``target_shadow``, ``shading`` (target
-            shading, tone-mapped), ``sky_mask`` (C = 1).
+            shading, tone-mapped), ``sky_mask`` (C = 1); and, as attributes, the photo's lighting as read.
         """
         req = RelightRequest(world_to_camera, sky_mask, **request)
         lin, _, gain = as_radiance(image) if radiance else (*as_image(image), 1.0)
         if lin.shape[0] != 1:
             raise ValueError(f"relight_layers takes one image, got a batch of {lin.shape[0]}")
-        layers = self._relight_tensors(lin, target, req)
+        reuse: dict[str, Any] = {}
+        layers = self._relight_tensors(lin, target, req, reuse=reuse, radiance=radiance)
         if req.linear:
             layers["relit"] = layers["relit"] / gain
-        return {k: v[0].permute(1, 2, 0).numpy() for k, v in layers.items()}
+        out = RelitLayers({k: v[0].permute(1, 2, 0).numpy() for k, v in layers.items()})
+        out.sky_lighting = reuse.get("sky_lighting")
+        out.decomposition_lighting = reuse["decomposition"]["lighting"][0].double().numpy()
+        out.source_lighting = reuse["source"][0].double().numpy()
+        out.K, out.world_to_camera = reuse["camera"]
+        return out
 
     def _stage(self, name: str) -> None:
         if self.on_stage is not None:
@@ -510,14 +563,16 @@ class Relighter:
         return as_mask(sky_mask, lin), ""
 
     def _relight_tensors(self, lin: torch.Tensor, target: Any, req: RelightRequest, layers: bool = True,
-                         reuse: dict[str, Any] | None = None) -> dict[str, torch.Tensor]:
+                         reuse: dict[str, Any] | None = None, radiance: bool = False) -> dict[str, torch.Tensor]:
         """The relit photo (``"relit"``: display values, or with ``req.linear`` the linear radiance) and, with
         ``layers``, every layer at full resolution, of one photo ``lin (1, 3, H, W)``: the one step under
         :meth:`relight`, :meth:`relight_sequence` and :meth:`relight_layers`.
 
         ``reuse``, a dict this method fills on its first call for a photo and reads on later
         ones: the sky mask, the camera, the denoised photo and the working-resolution decomposition,
-        which do not depend on the target (:meth:`relight_sequence`)."""
+        which do not depend on the target (:meth:`relight_sequence`); and the sky's reading of the photo's lighting
+        (``"sky_lighting"``, on the estimated track with :attr:`RelightOptions.source_estimate` ``"sky"``;
+        ``radiance``: ``lin`` is a radiance photo, read as linear)."""
         import warnings
 
         azimuth_deg, sky_type, sky_mask, source = req.azimuth_deg, req.sky, req.sky_mask, req.source
@@ -555,6 +610,20 @@ class Relighter:
             source_cam, suns["source_sun"] = camera_target(source, T, 0.0, sky_type)
         if "denoised" not in reuse:  # one photo, one denoise, whatever the targets
             reuse["denoised"] = self.denoised(lin)
+        if source is None and self.options.source_estimate == "sky":
+            if "sky_lighting" not in reuse:  # one photo, one reading
+                from .sky_lighting import read_sky_lighting
+
+                reuse["sky_lighting"] = reading = read_sky_lighting(lin, sky, K, T, radiance=radiance)
+                if reading.source == "sky":
+                    p = reading.posterior
+                    _log.info("the photo's lighting: read from its sky (sun %.1f deg up, %.1f deg from straight "
+                              "ahead; %s)", p.elevation_deg, p.azimuth_deg, p.sky_kind)
+                else:
+                    _log.info("the photo's lighting: the decomposition's estimate (fallback: %s)", reading.reason)
+            if reuse["sky_lighting"].source == "sky":
+                sh_c, sun_c = reuse["sky_lighting"].camera(T)
+                suns.update(read_source=torch.from_numpy(sh_c).float(), read_source_sun=torch.from_numpy(sun_c).float())
         self._stage("relighting")
         full = self.relight_full_resolution(lin, sky, target_cam, method=req.method, source_lighting=source_cam,
                                             decomposition=reuse.get("decomposition"), known_source=source is not None,
@@ -562,6 +631,7 @@ class Relighter:
         if "decomposition" not in reuse:
             reuse["decomposition"] = {k: full["working"][k] for k in (
                 "albedo", "normals", "shadow", "lighting", "foreground")}
+        reuse["source"] = full["working"]["source"]
         relit, out, small_sky = full["relit"], full["working"], full["working_sky"]
         size = lin.shape[-2:]
 
@@ -582,7 +652,7 @@ class Relighter:
                 if source is None and self.options.sky_level == "grey_world":
                     if "grey_world" not in reuse:  # one decomposition per photo, so one level
                         reuse["grey_world"] = float(grey_world_level(full["working_image"], out["normals"],
-                                                                     out["lighting"], ~small_sky)[0])
+                                                                     out["source"], ~small_sky)[0])
                     k *= reuse["grey_world"]
                 # rendered over the sky's bounding box only: a camera whose principal point moves with the crop
                 # sees the same rays (to float64 rounding), and most photos' sky is a band at the top

@@ -89,6 +89,37 @@ def test_02_the_ceilings_are_ceilings(quick) -> None:
     assert "after each output's best single gain" in md
 
 
+def test_02b_the_sun_section_has_every_estimate_and_falls_back_to_todays(quick) -> None:
+    """(b)'s sun: on crops with sky under a panorama's sun (the panorama's own, by ``split_sun``), the azimuth and
+    elevation errors of each estimate, median <= 90th percentile, azimuths within 0-180; where the sky's reading
+    falls back the relighter's estimate is today's (the same direction, shading error and self-relighting); the
+    report has the table."""
+    report = json.loads((quick / "real.json").read_text())
+    sunny = [c for c in report["crops"] if c["stratum"] == "sky" and c["sun"]["truth"] is not None]
+    assert {c["panorama"] for c in sunny} >= {"sunrise", "city"}
+    for c in sunny:
+        est = c["sun"]["estimates"]
+        assert set(est) == {"sky_reader", "proposed", "prior_mean"} | ({"sky_only"} if c["sun"]["source"] == "sky"
+                                                                         else set())
+        assert all(0.0 <= e["azimuth_error_deg"] <= 180.0 and e["elevation_error_deg"] >= 0.0 for e in est.values())
+        if c["sun"]["source"] == "fallback":
+            assert est["sky_reader"] == est["proposed"]
+            assert c["lighting"]["sky_reader"] == c["lighting"]["proposed"]
+            assert c["self"]["quotient_sky"] == c["self"]["quotient"]
+        else:
+            assert est["sky_reader"] == est["sky_only"]
+    for g in ("heldout", "training"):
+        sun = report["summary"][g]["sun"]
+        assert sun["crops_with_sun"] == sum(c["panorama"] in report["summary"][g]["panoramas"] for c in sunny)
+        from validation.bench.real_metrics import SUN_ESTIMATES
+
+        for e in SUN_ESTIMATES:
+            x = sun[e]
+            if x is not None:
+                assert x["azimuth_error_deg"]["median"] <= x["azimuth_error_deg"]["p90"]
+    assert "### The sun's position" in (quick / "real.md").read_text()
+
+
 def test_03_shading_error_is_scale_invariant_and_sees_direction() -> None:
     n = sh.fibonacci_sphere(128)
     L = np.zeros((9, 3))
@@ -171,3 +202,27 @@ def test_06_bad_input_gets_one_line_and_a_non_zero_exit_before_any_work(tmp_path
     assert err.startswith("physrelight: error:") and "\n" not in err
     assert {"not_2_1": "2:1", "nan": "NaN", "negative": "negative", "empty": "no .exr", "fov": "179"}[case] in err
     assert not out.exists()
+
+
+def test_07_the_sun_errors_against_a_hand_computed_case() -> None:
+    """A sun 10 deg up at azimuth 170 and an estimate 30 deg up at -170: 20 deg apart in azimuth the short way
+    round (across the seam), 20 in elevation, and by the spherical law of cosines
+    acos(sin 10 sin 30 + cos 10 cos 30 cos 20) = 27.345 deg apart. Median and 90th percentile of 10, 20, 30, 40:
+    25 and 37 (linear between the 3rd and 4th). The dominant direction of an order-2 lighting is its luminance
+    band 1, (x, y, z) = (c[3], c[1], c[2])."""
+    from physrelight.envmap import direction_from_angles
+    from validation.bench.real_metrics import dominant_direction, sun_angles, sun_error_summary, sun_errors
+
+    truth, est = direction_from_angles(10.0, 170.0), direction_from_angles(30.0, -170.0)
+    assert sun_angles(truth) == pytest.approx((10.0, 170.0))
+    e = sun_errors(est, truth)
+    r = math.radians
+    by_hand = math.degrees(math.acos(math.sin(r(10)) * math.sin(r(30)) + math.cos(r(10)) * math.cos(r(30)) * math.cos(r(20))))
+    assert e == pytest.approx({"azimuth_error_deg": 20.0, "elevation_error_deg": 20.0, "angle_deg": by_hand})
+    assert by_hand == pytest.approx(27.345, abs=0.001)
+    s = sun_error_summary([{"azimuth_error_deg": a, "elevation_error_deg": 0.0, "angle_deg": a} for a in (10, 20, 30, 40)])
+    assert s["crops"] == 4 and s["azimuth_error_deg"] == pytest.approx({"median": 25.0, "p90": 37.0})
+    assert sun_error_summary([]) is None
+    c = np.zeros((9, 3))
+    c[1], c[2], c[3] = 0.0, -2.0, 2.0  # y, z, x in every channel: light from +x and -z
+    np.testing.assert_allclose(dominant_direction(c), np.array([1.0, 0.0, -1.0]) / math.sqrt(2.0))

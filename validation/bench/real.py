@@ -48,14 +48,16 @@ import torch
 from physrelight.full_resolution import working_resolution
 from physrelight.horizon import estimate_pitch
 from physrelight.sky_view import fitted_sky, target_sky
+from learned.sky_lighting import read_sky_lighting
 from learned.source_lighting import grey_world_level
 from physrelight import colour, envmap, metrics, panorama, sh
 
 from .methods import to_chw
 from .protocols import display_at_best_gain
-from .real_metrics import (BOUNDARY_TOLERANCE, CAMERA_VARIANTS, ESTIMATES, PSNR_CAP, SEGMENTERS, SELF_METHODS,
-                           SKY_SOURCES, SPHERE_NORMALS, brightness_sky, camera_variant, dc_luminance, level_stops,
-                           shading_error, targets_for, top_rows_sky)
+from .real_metrics import (BOUNDARY_TOLERANCE, CAMERA_VARIANTS, ESTIMATES, GROUND_ALBEDOS, PSNR_CAP, SEGMENTERS,
+                           SELF_METHODS, SKY_SOURCES, SPHERE_NORMALS, brightness_sky, camera_variant, dc_luminance,
+                           dominant_direction, level_stops, shading_error, sun_angles, sun_errors, targets_for,
+                           top_rows_sky)
 
 __all__ = ["ESTIMATES", "PSNR_CAP", "REAL_LEVELS", "SEGMENTERS", "SELF_METHODS", "SKY_SOURCES", "RealLevel",
            "brightness_sky", "level_stops", "more_panoramas", "run_real_bench", "score_crop", "shading_error", "top_rows_sky"]
@@ -159,7 +161,16 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
     cam_normals = normals @ R.T  # n_c = R n_w
     truth = truth_irradiance * g[None, :]
     grey = float(grey_world_level(full["working_image"], work["normals"], work["lighting"], ~full["working_sky"])[0])
+    # the sun and sky read from the photo's sky through relight's camera (the crop's field of view, as EXIF gives
+    # it; the pitch from the sky's horizon; heading world -Z), as RelightOptions(source_estimate="sky") reads them
+    R_est = panorama.level_camera(0.0, pitch)[:3, :3]
+    t0 = time.perf_counter()
+    reading = read_sky_lighting(lin, seg, crop.K, R_est)
+    seconds["sky_reader"] = time.perf_counter() - t0
+    read_cam = reading.camera(R_est) if reading.source == "sky" else None
     estimates = {"proposed": work["lighting"][0].double().numpy(),
+                 # what the relighter divides by with source_estimate="sky": the reading, else the decomposition's
+                 "sky_reader": read_cam[0] if read_cam is not None else work["lighting"][0].double().numpy(),
                  # the same shape at a light meter's level: what a rendered sky is put in (study 36)
                  "grey_world": work["lighting"][0].double().numpy() * grey,
                  "prior_mean": np.asarray(relighter.prior.mean, dtype=np.float64).reshape(9, 3)}
@@ -169,6 +180,7 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
         out["lighting"][name] = {"shading_error": shading_error(E, truth), "level_stops": level_stops(L, source)}
     E2 = np.asarray(sh.irradiance(crop.panorama.sh(2) * g[None, :], normals))
     out["lighting"]["truth_order2"] = {"shading_error": shading_error(E2, truth), "level_stops": 0.0}
+    out["sun"] = _sun_figures(reading, R_est, crop, estimates, cam_normals, truth)
     # ... and the estimate's stability: the decomposition of each camera setting's photo, on its own mask (the
     # scale-invariant error: an exposure changes the level only; a colour cast is a change of the light's colour
     # to the photo, so it counts)
@@ -185,12 +197,15 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
     # single gain (display_at_best_gain): its structure apart from its level
     photo_disp = to_chw(crop.display())
     preds, gained, names = [], [], []
+    read = {} if read_cam is None else {"read_source": torch.from_numpy(read_cam[0]).float(),
+                                         "read_source_sun": torch.from_numpy(read_cam[1]).float()}
     for m in SELF_METHODS[:-1]:
         t0 = time.perf_counter()
         relit = relighter.relight_full_resolution(lin, seg, torch.from_numpy(source).float(),
                                                   source_lighting=torch.from_numpy(source).float(),
-                                                  method=m.removesuffix("_known"), decomposition=dec,
-                                                  known_source=m.endswith("_known"))["relit"]
+                                                  method=m.removesuffix("_known").removesuffix("_sky"), decomposition=dec,
+                                                  known_source=m.endswith("_known"),
+                                                  **(read if m.endswith("_sky") else {}))["relit"]
         seconds.setdefault(m, time.perf_counter() - t0)
         preds.append(torch.where(fg, _display(relit), photo_disp))
         if bool(fg.any()):
@@ -244,6 +259,51 @@ def score_crop(relighter: Any, crop: Any, targets: Sequence[Any], truth_irradian
                 for src, img in skies.items()}
     out["seconds"] = seconds
     return out
+
+
+def _sun_figures(reading: Any, R_est: np.ndarray, crop: Any, estimates: dict[str, np.ndarray],
+                 cam_normals: np.ndarray, truth: np.ndarray) -> dict[str, Any]:
+    """The sun's position estimated from a crop against the panorama's (:func:`physrelight.envmap.split_sun`), for
+    each of :data:`real_metrics.SUN_ESTIMATES`; each estimate is a direction in the camera's frame, brought into
+    the panorama's by the crop's true camera (its yaw known); and the shading error of the sky's reading with each
+    ground reflectance of :data:`real_metrics.GROUND_ALBEDOS` (crops it reads)."""
+    from learned.sky_lighting import sky_sun_sh
+
+    sun = _panorama_sun(crop.panorama)
+    post = reading.posterior
+    out: dict[str, Any] = {"source": reading.source, "reason": reading.reason, "sky_kind": post.sky_kind,
+                           "posterior": {k: v for k, v in post.summary().items() if k not in ("reason", "sky_kind")},
+                           "truth": None, "estimates": {}}
+    R = crop.rotation
+    cam = {"proposed": dominant_direction(estimates["proposed"]),
+           "prior_mean": dominant_direction(estimates["prior_mean"])}
+    if reading.source == "sky":
+        cam["sky_only"] = R_est @ np.asarray(post.sun_direction, np.float64)
+        out["ground_albedo_shading_error"] = {
+            f"{a:g}": shading_error(np.asarray(sh.irradiance(np.asarray(sh.rotation(R_est, 2)) @ sky_sun_sh(post, a)[0],
+                                                             cam_normals)), truth) for a in GROUND_ALBEDOS}
+    cam["sky_reader"] = cam.get("sky_only", cam["proposed"])
+    if sun is None:
+        return out
+    el, az = sun_angles(sun)
+    out["truth"] = {"elevation_deg": el, "azimuth_deg": az}
+    for name, d in cam.items():
+        w = R.T @ d  # camera -> the panorama's world through the true camera
+        e_el, e_az = sun_angles(w)
+        out["estimates"][name] = {"elevation_deg": e_el, "azimuth_deg": e_az, **sun_errors(w, sun)}
+    return out
+
+
+_SUNS: dict[str, np.ndarray | None] = {}
+
+
+def _panorama_sun(pano: Any) -> np.ndarray | None:
+    """The panorama's sun (world ``(3,)``) when :func:`physrelight.envmap.split_sun` finds one above the horizon."""
+    key = str(pano.path)
+    if key not in _SUNS:
+        d = envmap.split_sun(pano.env).direction
+        _SUNS[key] = None if d is None or d[1] <= 0 else np.asarray(d, np.float64)
+    return _SUNS[key]
 
 
 # ----------------------------------------------------------------------------- the run

@@ -10,14 +10,28 @@ import numpy as np
 
 from physrelight import colour
 
-__all__ = ["BOUNDARY_TOLERANCE", "CAMERA_VARIANTS", "ESTIMATES", "PSNR_CAP", "SEGMENTERS", "SELF_METHODS",
-           "SKY_SOURCES", "SPHERE_NORMALS", "TOP_ROWS_FRACTION", "brightness_sky", "camera_variant", "dc_luminance",
-           "level_stops", "shading_error", "targets_for", "top_rows_sky"]
+__all__ = ["BOUNDARY_TOLERANCE", "CAMERA_VARIANTS", "ESTIMATES", "GROUND_ALBEDOS", "PSNR_CAP", "SEGMENTERS",
+           "SELF_METHODS", "SKY_SOURCES", "SPHERE_NORMALS", "SUN_ESTIMATES", "TOP_ROWS_FRACTION", "brightness_sky",
+           "camera_variant", "dc_luminance", "dominant_direction", "level_stops", "shading_error", "sun_angles",
+           "sun_error_summary", "sun_errors", "targets_for", "top_rows_sky"]
 
 SEGMENTERS = ("segmenter", "segmenter_64px", "top_rows", "brightness")
-ESTIMATES = ("proposed", "grey_world", "prior_mean", "truth_order2")
+ESTIMATES = ("proposed", "sky_reader", "grey_world", "prior_mean", "truth_order2")
+"""(b)'s lighting estimates: the decomposition's (``proposed``), the sky's reading where it is informative and the
+decomposition's elsewhere (``sky_reader``: what ``RelightOptions(source_estimate="sky")`` divides by), the
+decomposition's at a light meter's level, the prior's mean, the truth's order-2 truncation."""
 SKY_SOURCES = ("target", "fit", "skygan", "sh_radiance", "keep", "exact_view")
-SELF_METHODS = ("quotient_known", "quotient", "proposed", "lambertian_sh", "shadownet_lambertian", "identity")
+SELF_METHODS = ("quotient_known", "quotient", "quotient_sky", "proposed", "proposed_sky", "lambertian_sh",
+                "shadownet_lambertian", "identity")
+"""(d)'s methods; ``*_sky``: the method on the estimated track with the photo's lighting read from its sky where it
+says something (``RelightOptions(source_estimate="sky")``)."""
+SUN_ESTIMATES = ("sky_reader", "sky_only", "proposed", "prior_mean")
+"""The sun's position from: the sky's posterior's MAP where it is informative, else the decomposition's
+(``sky_reader``, what the relighter uses); the sky's MAP on the crops where it is informative only (``sky_only``);
+the dominant direction of the decomposition's order-2 lighting (``proposed``, today's estimate); the dominant
+direction of the lighting prior's mean (``prior_mean``: a fixed guess in the camera's frame, 2.3 deg from its up axis)."""
+GROUND_ALBEDOS = (0.0, 0.1, 0.2, 0.3)
+"""The ground reflectances tried below the sky's reading (``learned.sky_lighting.sky_sun_sh``) on the crops it reads."""
 BOUNDARY_TOLERANCE = 2.0
 SPHERE_NORMALS = 256
 TOP_ROWS_FRACTION = 1.0 / 3.0
@@ -85,6 +99,46 @@ def level_stops(estimate: np.ndarray, truth: np.ndarray) -> float:
     if num <= 0:
         return -10.0
     return float(np.clip(math.log2(num / den), -10.0, 10.0))
+
+
+def dominant_direction(coeffs: np.ndarray) -> np.ndarray:
+    """``(3,)`` unit direction of an order-2 lighting's band 1 in luminance (``coeffs (9, 3)``, DESIGN.md order
+    ``[Y00, y, z, x, ...]``): where its light comes from most. A zero band gives +Y."""
+    c = np.asarray(coeffs, np.float64) @ np.asarray(colour.LUMINANCE)
+    d = np.array([c[3], c[1], c[2]])
+    n = float(np.linalg.norm(d))
+    return d / n if n > 0 else np.array([0.0, 1.0, 0.0])
+
+
+def sun_angles(direction: np.ndarray) -> tuple[float, float]:
+    """``(elevation_deg, azimuth_deg)`` of a world direction ``(3,)`` (Y up; azimuth as
+    :func:`physrelight.envmap.direction_from_angles`: 0 = -Z, 90 = +X)."""
+    d = np.asarray(direction, np.float64)
+    d = d / np.linalg.norm(d)
+    return math.degrees(math.asin(float(np.clip(d[1], -1.0, 1.0)))), math.degrees(math.atan2(d[0], -d[2]))
+
+
+def sun_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:
+    """The errors of an estimated sun direction against the true one (world ``(3,)`` each): ``azimuth_error_deg``
+    (absolute, the shorter way round, 0-180), ``elevation_error_deg`` (absolute), ``angle_deg`` (between the two)."""
+    e_el, e_az = sun_angles(estimate)
+    t_el, t_az = sun_angles(truth)
+    a, b = np.asarray(estimate, np.float64), np.asarray(truth, np.float64)
+    cos = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
+    return {"azimuth_error_deg": abs((e_az - t_az + 180.0) % 360.0 - 180.0),
+            "elevation_error_deg": abs(e_el - t_el), "angle_deg": math.degrees(math.acos(float(np.clip(cos, -1, 1))))}
+
+
+def sun_error_summary(errors: Sequence[dict[str, float]]) -> dict[str, Any] | None:
+    """Median and 90th percentile (linear interpolation, ``numpy.percentile``) of each of :func:`sun_errors`'
+    figures over crops, with their count; None without crops."""
+    if not errors:
+        return None
+    out: dict[str, Any] = {"crops": len(errors)}
+    for k in ("azimuth_error_deg", "elevation_error_deg", "angle_deg"):
+        v = np.array([e[k] for e in errors], np.float64)
+        out[k] = {"median": float(np.median(v)), "p90": float(np.percentile(v, 90))}
+    return out
 
 
 def top_rows_sky(height: int, width: int, fraction: float = TOP_ROWS_FRACTION) -> np.ndarray:

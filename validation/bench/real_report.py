@@ -15,7 +15,7 @@ from physrelight.stats import hierarchical_bootstrap
 
 from ..common import jsonable, machine_line
 from .real_metrics import (BOUNDARY_TOLERANCE, CAMERA_VARIANTS, ESTIMATES, SEGMENTERS, SELF_METHODS, SKY_SOURCES,
-                           shading_error, targets_for)
+                           SUN_ESTIMATES, shading_error, sun_error_summary, targets_for)
 
 GROUP_TITLES = {"heldout": "held out (sunrise)", "training": "training side (seen in training)",
                 "indoor": "indoor (studio, the rooms)", "user": "your panoramas"}
@@ -101,6 +101,15 @@ def summarise(crops: Sequence[dict[str, Any]], samples: int) -> dict[str, Any]:
                    for m in SELF_METHODS if m != "identity"}
     out["self_apart"] = {m: {k: iv(apart_self, lambda c, m=m, k=k: c["self"][m][k]) for k in ("l1", "psnr")}
                          for m in SELF_METHODS if m != "identity"}
+    sunny = [c for c in main if c.get("sun", {}).get("truth") is not None]
+    out["sun"] = {"crops_with_sun": len(sunny), "crops_read": sum(c["sun"]["source"] == "sky" for c in sunny),
+                  **{e: sun_error_summary([c["sun"]["estimates"][e] for c in sunny if e in c["sun"]["estimates"]])
+                     for e in SUN_ESTIMATES}}
+    read = [c for c in main if "ground_albedo_shading_error" in c.get("sun", {})]
+    out["sun"]["ground_albedo_shading_error"] = {
+        a: iv(read, lambda c, a=a: c["sun"]["ground_albedo_shading_error"][a])
+        for a in (read[0]["sun"]["ground_albedo_shading_error"] if read else ())}
+    out["sun"]["read_crops"] = len(read)
     out["pitch"] = {"abs_error_deg": iv(main, lambda c: abs(c["pitch"]["error_deg"])),
                     "error_deg": iv(main, lambda c: c["pitch"]["error_deg"])}
     out["declined"] = {"sky_crops": iv(main, lambda c: float(bool(c["no_sky_reason"]))),
@@ -192,11 +201,38 @@ def markdown(report: dict[str, Any], chart: str, panels: list[str]) -> str:
     lines += _table(groups, s, ("as is", *CAMERA_VARIANTS), lighting_stability, "camera")
     lines += ["", "Level error |log2(DC estimate / DC truth)| in stops (the estimate's units are the linearised "
               "photo's; the albedo-lighting scale is part of it):", ""]
-    lines += _table(groups, s, ESTIMATES[:3], lambda g, r: g["lighting"][r]["abs_level_stops"], "estimate", 2)
+    lines += _table(groups, s, ESTIMATES[:-1], lambda g, r: g["lighting"][r]["abs_level_stops"], "estimate", 2)
     lines += ["", "Signed level error in stops:", ""]
-    lines += _table(groups, s, ESTIMATES[:3], lambda g, r: g["lighting"][r]["level_stops"], "estimate", 2)
+    lines += _table(groups, s, ESTIMATES[:-1], lambda g, r: g["lighting"][r]["level_stops"], "estimate", 2)
     lines += ["", "The same on the crops counted apart (no sky, or mostly ground):", ""]
     lines += _table(groups, s, ESTIMATES, lambda g, r: g["lighting"][r]["shading_error_apart"], "estimate")
+    lines += ["", "### The sun's position", "",
+              "Crops with sky whose panorama has a sun above the horizon (`physrelight.envmap.split_sun`); each "
+              "estimate is a direction in the camera's frame brought into the panorama's by the crop's true camera "
+              "(its yaw known). `sky_reader`: the sky's posterior MAP (`learned.sky_lighting.read_sky_lighting`, "
+              "the segmenter's mask, relight's camera: the field of view given, the pitch from the sky's horizon) "
+              "where it is informative, else `proposed`'s: what `RelightOptions(source_estimate=\"sky\")` uses; "
+              "`sky_only`: the same on the crops it reads only; `proposed`: the dominant direction (luminance band "
+              "1) of the decomposition's order-2 lighting, today's estimate; `prior_mean`: that of the lighting "
+              "prior's mean, a fixed guess (2.3 deg from the camera's up axis). Absolute errors in degrees, median "
+              "/ 90th percentile (crops):", ""]
+    sun_groups = [g for g in groups if s[g].get("sun", {}).get("crops_with_sun")]
+    lines += ["| estimate | " + " | ".join(f"{GROUP_TITLES[g]}: azimuth | elevation" for g in sun_groups) + " |",
+              "|" + " --- |" * (2 * len(sun_groups) + 1)]
+    for e in SUN_ESTIMATES:
+        cells = []
+        for g in sun_groups:
+            x = s[g]["sun"][e]
+            cells += (["n/a", "n/a"] if x is None else
+                      [f"{x['azimuth_error_deg']['median']:.1f} / {x['azimuth_error_deg']['p90']:.1f} ({x['crops']})",
+                       f"{x['elevation_error_deg']['median']:.1f} / {x['elevation_error_deg']['p90']:.1f}"])
+        lines.append(f"| {e} | " + " | ".join(cells) + " |")
+    lines += ["", "Crops with a sun / read by the sky: " + "; ".join(
+        f"{GROUP_TITLES[g]} {s[g]['sun']['crops_with_sun']} / {s[g]['sun']['crops_read']}" for g in sun_groups) + ".",
+              "", "The sky's reading's shading error with the ground below the horizon at each reflectance "
+              "(`learned.sky_lighting.sky_sun_sh`; 0: black), on the crops with sky it reads:", ""]
+    albedos = sorted({a for g in groups for a in s[g].get("sun", {}).get("ground_albedo_shading_error", {})}, key=float)
+    lines += _table(groups, s, albedos, lambda g, r: g["sun"]["ground_albedo_shading_error"].get(r), "ground albedo")
     lines += ["", "Cross-view consistency: two crops of one panorama, their estimates turned into the world frame, "
               "scale-invariant irradiance difference (every pair of crops; 0 for the truth):", ""]
     lines += _table(groups, s, ("proposed", "prior_mean"), lambda g, r: g["cross_view"][r], "estimate")
