@@ -68,7 +68,8 @@ SH relighting. Outputs: demo.png, metrics.json.
 Part 2 (validation/relight_demo.py, needs the synth extra): a synthetic scene path traced with
 Mitsuba under a clear sky is relit to three other lightings with the shipped weights and compared
 with the path-traced targets (proposed, lambertian_sh, identity: l1, PSNR, SSIM); scikit-image's
-rocket.jpg is relit too when scikit-image is installed. Outputs: relight_demo.png,
+rocket.jpg is relit too when scikit-image is installed. --source-estimate sky relights from the sun
+and sky read from the photo's sky instead of the decomposition's lighting. Outputs: relight_demo.png,
 relight_metrics.json/.md.
 """
 
@@ -92,7 +93,7 @@ def _demo(args: argparse.Namespace) -> int:
     from validation import relight_demo
 
     print("== part 2: the learned pipeline on a path-traced scene and a real photo")
-    relight_demo.run(args.output, size=args.scene_size, seed=args.seed)
+    relight_demo.run(args.output, size=args.scene_size, seed=args.seed, source_estimate=args.source_estimate)
     return 0
 
 
@@ -106,6 +107,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=positive_int, default=80, help="sphere image size in pixels (default: 80)")
     p.add_argument("--scene-size", type=positive_int, default=96, help="synthetic scene size in pixels (default: 96)")
     p.add_argument("--seed", type=int, default=7, help="synthetic scene seed (default: 7)")
+    # learned.relight_options.SOURCE_ESTIMATES, spelled out: --help must not import the learned package
+    p.add_argument("--source-estimate", choices=("decomposition", "sky"), default="decomposition",
+                   help="part 2: the photo's own lighting the relighter divides by: the decomposition's (default) or "
+                        "the sun and sky read from the photo's sky (RelightOptions.source_estimate)")
     p.add_argument("--physics-only", action="store_true", help="only part 1 (no Mitsuba, no networks)")
     p.set_defaults(handler=_demo, output_folders=("output",))
 

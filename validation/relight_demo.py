@@ -6,6 +6,11 @@ hazy sky, the shipped forest HDRI turned 120 degrees). The source photo is relit
 target with the shipped weights, following the benchmark protocol (docs/bench.md): the
 target keeps the source photo's exposure, the networks get the target's SH in the source
 photo's units, and the result is compared on the foreground with the path-traced target.
+The photo's own lighting, which the quotient divides by, is the relighter's estimate: the decomposition's
+(``source_estimate="decomposition"``, the default, as ``RelightOptions``'s) or the sun and sky read from the photo's
+sky (``"sky"``: :func:`learned.sky_lighting.read_sky_lighting` through the scene's camera on the scene's sky mask,
+the demo's protocol; where the reading falls back, the decomposition's, as ``RelightOptions(source_estimate="sky")``
+does). The reading and its sun's error against the path-traced source's go to the metrics.
 Methods: ``proposed`` (the default: the shipped neural renderer, a learned gain on the quotient
 image), ``quotient`` (the photo times the ratio of target to estimated source shading),
 ``lambertian_sh`` (the decomposition times the
@@ -72,8 +77,10 @@ def _scene(seed: int, size: int, spp: int, log: Callable[[str], None]) -> dict:
             geo = render.render_geometry(mi_scene, 0, cam, spp=8, seed=seed)
             out["sky"] = geo.sky_mask
             out["foreground"] = ~geo.sky_mask & (np.linalg.norm(geo.normal, axis=-1) > 0.5)
+            out["normals"] = geo.normal  # (H, W, 3) camera frame, 0 on sky
         radiance = render.render_radiance(mi_scene, 0, spp=spp, seed=seed + 17 * k)
-        out["lights"][name] = {"radiance": radiance, "sh": light.sh(2, w2c), "sky_map": light.sky}
+        out["lights"][name] = {"radiance": radiance, "sh": light.sh(2, w2c), "sky_map": light.sky,
+                               "sun_direction": light.sun_direction}
     src = next(iter(out["lights"]))
     out["ev"] = metered_ev(out["lights"][src]["radiance"])
     return out
@@ -113,9 +120,44 @@ def _real_photo() -> np.ndarray | None:
     return data.rocket().astype(np.float32) / 255.0
 
 
-def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: Callable[[str], None] = print) -> dict:
-    """Run the pipeline demo; write the panel and metrics into ``out_dir``; return the metrics."""
+def _sky_reading(lin: torch.Tensor, sky: np.ndarray, K: np.ndarray, w2c: np.ndarray,
+                 true_sun: np.ndarray | None) -> tuple[dict, dict]:
+    """The photo's lighting read from its sky (:func:`learned.sky_lighting.read_sky_lighting`) through the scene's
+    camera: ``(relight_full_resolution``'s ``read_source``/``read_source_sun`` keywords (empty on a fallback), the
+    reading as JSON, with the MAP sun's angle to the path-traced source's ``true_sun (3,)`` world direction)``."""
+    import math
+
+    from learned.sky_lighting import read_sky_lighting
+
+    reading = read_sky_lighting(lin, torch.from_numpy(sky), K, w2c)
+    post = reading.posterior
+    info: dict = {"source": reading.source, "reason": reading.reason, "sky_kind": post.sky_kind,
+                  "credible_area_sr": float(post.credible_area_sr), "sun_world": None, "sun_error_deg": None}
+    if not post.has_sun:
+        return {}, info
+    d = np.asarray(post.sun_direction, dtype=np.float64)
+    info["sun_world"] = [float(x) for x in d]
+    if true_sun is not None:
+        info["sun_error_deg"] = math.degrees(math.acos(float(np.clip(d @ np.asarray(true_sun), -1.0, 1.0))))
+    if reading.source != "sky":
+        return {}, info
+    sh_c, sun_c = reading.camera(w2c)
+    return {"read_source": torch.from_numpy(sh_c).float(), "read_source_sun": torch.from_numpy(sun_c).float()}, info
+
+
+def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: Callable[[str], None] = print,
+        source_estimate: str = "decomposition") -> dict:
+    """Run the pipeline demo; write the panel and metrics into ``out_dir``; return the metrics.
+
+    ``source_estimate``: the photo's own lighting on the estimated track (:data:`learned.relight_options.SOURCE_ESTIMATES`,
+    as :attr:`learned.relight_options.RelightOptions.source_estimate`): ``"decomposition"`` (the default) or
+    ``"sky"``.
+    """
     from learned import Relighter
+    from learned.relight_options import SOURCE_ESTIMATES
+
+    if source_estimate not in SOURCE_ESTIMATES:
+        raise ValueError(f"source_estimate must be one of {SOURCE_ESTIMATES}, got {source_estimate!r}")
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -130,10 +172,17 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
     sky = torch.from_numpy(sc["sky"])[None, None]
     K, w2c = sc["K"], sc["camera"]
     fg = torch.from_numpy(sc["foreground"])[None, None].float()
-    relighter = Relighter.load()
+    relighter = Relighter.load().with_options(source_estimate=source_estimate)
 
     log("[2/3] relighting with the shipped weights, compared with path tracing")
-    results: dict = {"seed": seed, "size": size, "spp": spp, "source": names[0], "targets": {}}
+    results: dict = {"seed": seed, "size": size, "spp": spp, "source": names[0], "source_estimate": source_estimate,
+                     "targets": {}}
+    read: dict = {}
+    if source_estimate == "sky":
+        read, results["sky_reading"] = _sky_reading(lin, sc["sky"], K, w2c, src["sun_direction"])
+        r = results["sky_reading"]
+        log(f"  the photo's lighting: {'read from its sky' if r['source'] == 'sky' else 'fallback: ' + r['reason']}"
+            + ("" if r["sun_error_deg"] is None else f" (its sun {r['sun_error_deg']:.1f} deg from the true one)"))
     rows = []
     for name in names[1:]:
         target = colour.to_ldr(_chw(sc["lights"][name]["radiance"] * gain))
@@ -143,7 +192,7 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
             t = time.perf_counter()
             relit = relighter.relight_full_resolution(
                 lin, sky, torch.from_numpy(sc["lights"][name]["sh"] * gain).float(),
-                source_lighting=torch.from_numpy(src["sh"] * gain).float(), method=method)["relit"]
+                source_lighting=torch.from_numpy(src["sh"] * gain).float(), method=method, **read)["relit"]
             preds[method] = colour.to_ldr(relit.clamp_min(0))
             seconds[method] = time.perf_counter() - t
         entry = {}
@@ -167,7 +216,7 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
         real_row = [real, forest, low_sun]
         results["real_photo"] = {"name": "skimage rocket.jpg", "shape": list(real.shape),
                                  "targets": ["forest HDRI", "clear sky, sun 10 deg, azimuth 60 deg"]}
-    _panel(out / "relight_demo.png", names[0], rows, real_row)
+    _panel(out / "relight_demo.png", names[0], rows, real_row, source_estimate)
     results["seconds"] = time.perf_counter() - t0
     io.write_json(out / "relight_metrics.json", results)
     lines = ["| target | method | l1 | PSNR dB | SSIM |", "| --- | --- | ---: | ---: | ---: |"]
@@ -183,11 +232,12 @@ def run(out_dir: str | Path, size: int = 96, spp: int = 64, seed: int = 7, log: 
     return results
 
 
-def panel_figure(source: str, rows: list, real_row: list | None):
+def panel_figure(source: str, rows: list, real_row: list | None, source_estimate: str = "decomposition"):
     """The demo's panel as a matplotlib figure.
 
     Args:
         source: the source lighting's name (the title).
+        source_estimate: the photo's own lighting the relighter used (the title).
         rows: one per target, ``(name, photo, target, [(method, relit, error), ...])``: ``(1, 3, H, W)`` display
             images (the relit ones with the target's sky) and ``(H, W)`` error maps (:func:`error_map`).
         real_row: ``[photo, relit, relit]`` ``(H, W, 3)`` of the real photo, or None.
@@ -235,7 +285,8 @@ def panel_figure(source: str, rows: list, real_row: list | None):
     for ax in axes.flat:
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.suptitle(f"Relighting a path-traced scene ({source}) with the shipped weights; the relit photos get the "
+    fig.suptitle(f"Relighting a path-traced scene ({source}) with the shipped weights, the photo's own lighting "
+                 f"from {'its sky' if source_estimate == 'sky' else 'the decomposition'}; the relit photos get the "
                  "target's sky as physrelight relight paints it", fontsize=8)
     fig.tight_layout(rect=(0, 0, 0.93, 1))
     if im is not None:
@@ -246,10 +297,10 @@ def panel_figure(source: str, rows: list, real_row: list | None):
     return fig
 
 
-def _panel(path: Path, source: str, rows: list, real_row: list | None) -> None:
+def _panel(path: Path, source: str, rows: list, real_row: list | None, source_estimate: str) -> None:
     import matplotlib.pyplot as plt
 
-    fig = panel_figure(source, rows, real_row)
+    fig = panel_figure(source, rows, real_row, source_estimate)
     with io.atomic_path(path, ".png") as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
