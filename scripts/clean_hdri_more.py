@@ -119,7 +119,10 @@ package `@pmndrs/assets` 1.7.0; the shared folder `data/hdri_more` reproduces th
 - Storage: PIZ (lossless), half floats as the source (float32 only where a value exceeds 65504:
   {floats}): {total / 1e6:.1f} MB in all. Half rounding of the repaired texels moves a map's energy by
   at most 1e-4 (the table is measured on the stored files).
-- Not here: sky masks (`NAME_sky.png` of `data/hdri`); they need a review first.
+- Sky masks: `NAME_sky.png` beside the maps (white = sky, as `data/hdri`'s), written by
+  `scripts/hdri_more_sky_masks.py` after a review (docs/experiments/58-prior-on-more-panoramas.md): the five
+  outdoor maps city, dawn, night, sky, venice; the eight rooms' are empty (no sky: negatives). None for
+  pm_forest (sky through a canopy at 512 px is texel-scale speckle) nor the walkway pm_bridge.
 
 ## The cleaning (`physrelight.panorama_repair.repair_panorama`)
 

@@ -85,3 +85,15 @@ def test_05_bad_input_exits_2_with_one_line(script, tmp_path: Path, capsys: pyte
     assert script.main(["--src", str(tmp_path), "--dst", str(tmp_path / "out"), "--only", "pm_moon"]) == 2
     assert "unknown map" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_06_the_readme_says_which_maps_have_a_sky_mask() -> None:
+    # The README's sentence is the generator's text; the folder is what scripts/hdri_more_sky_masks.py wrote.
+    kinds = json.loads((PACKAGED / "kinds.json").read_text())
+    masked = {n for n in kinds if (PACKAGED / f"{n}_sky.png").is_file()}
+    readme = (PACKAGED / "README.md").read_text()
+    assert "Not here: sky masks" not in readme
+    assert {n for n in masked if kinds[n] == "outdoor"} == {"pm_city", "pm_dawn", "pm_night", "pm_sky", "pm_venice"}
+    assert "outdoor maps city, dawn, night, sky, venice" in " ".join(readme.split())
+    assert {n for n, k in kinds.items() if k == "indoor"} <= masked and "the eight rooms' are empty" in readme
+    assert not {"pm_forest", "pm_bridge"} & masked and "pm_forest" in readme and "pm_bridge." in readme
