@@ -69,6 +69,24 @@ _POOL_MAX_RADIUS = 16
 """Up to this radius :func:`box_filter` averages directly (two separable pools), beyond it by summed-area tables."""
 
 
+def _window_count(h: int, w: int, radius: int, dtype: torch.dtype, device: torch.device | str = "cpu") -> torch.Tensor:
+    """The pixel counts of the ``(2r+1)^2`` windows (cut at the border) of an ``h x w`` image, the very numbers in
+    ``dtype`` that the summed-area path of :func:`box_filter` gets by filtering ones: ``(1, 1, h, w)``.
+
+    Along the columns the ones sum to exact integers ``n_i``; along the rows their running sums ``(j + 1) * n_i`` are
+    rounded to ``dtype`` (in float32 past ``2**24``: a row of 15000 pixels at radius 600) before the window's two ends
+    are subtracted, as the filter does, so the counts are computed here the same way, without two passes of
+    summed-area tables over a plane of ones (a third of a guided filter's box sums)."""
+    rh, rw = min(radius, h), min(radius, w)
+    i = torch.arange(h, dtype=torch.float64, device=device)[:, None]
+    j = torch.arange(w, dtype=torch.float64, device=device)[None, :]
+    n_i = torch.minimum(i + rh, torch.full_like(i, h - 1)) - torch.maximum(i - rh - 1, torch.full_like(i, -1.0))
+    hi = torch.minimum(j + rw, torch.full_like(j, w - 1))
+    lo = j - rw - 1  # the running sum before the window; none (0) at the left border
+    before = torch.where(lo >= 0, (lo + 1) * n_i, torch.zeros(()))
+    return (((hi + 1) * n_i).to(dtype) - before.to(dtype))[None, None]
+
+
 def box_filter(x: torch.Tensor, radius: int) -> torch.Tensor:
     """Mean of ``x (B, C, H, W)`` over the ``(2r+1)^2`` window of each pixel, the window cut at the
     border (the mean of the pixels inside the image, not of zero padding). Small radii average
@@ -81,8 +99,11 @@ def box_filter(x: torch.Tensor, radius: int) -> torch.Tensor:
         rows = F.avg_pool2d(x, (1, k), stride=1, padding=(0, radius), count_include_pad=False)
         return F.avg_pool2d(rows, (k, 1), stride=1, padding=(radius, 0), count_include_pad=False)
     h, w = x.shape[-2:]
-    ones = torch.ones(1, 1, h, w, dtype=x.dtype, device=x.device)
-    count = _window_sums(_window_sums(ones, radius, -2), radius, -1)
+    if x.dtype in (torch.float32, torch.float64):
+        count = _window_count(h, w, radius, x.dtype, x.device)
+    else:  # cumsum's own precision: count as the sums are made
+        count = _window_sums(_window_sums(torch.ones(1, 1, h, w, dtype=x.dtype, device=x.device), radius, -2),
+                             radius, -1)
     return _window_sums(_window_sums(x, radius, -2), radius, -1) / count
 
 

@@ -315,7 +315,8 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
         d_fg = ((x - _local_mean(sure_fg, x, r, min_share)) ** 2).sum(1, keepdim=True)
     else:
         # "gauss": a diagonal Gaussian per side, so a smooth sky does not claim a varied foreground's outliers
-        d_sky, d_fg = _local_gaussian_nll(x, sure_sky, r, min_share), _local_gaussian_nll(x, sure_fg, r, min_share)
+        x2 = x * x
+        d_sky, d_fg = _local_gaussian_nll(x, sure_sky, r, min_share, x2), _local_gaussian_nll(x, sure_fg, r, min_share, x2)
     return torch.where(near, d_sky < d_fg, sky)
 
 
@@ -344,11 +345,12 @@ def _local_mean(w: torch.Tensor, v: torch.Tensor, r: int, min_share: float = 0.0
     return _local_moments(w, [v], r, min_share)[0]
 
 
-def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int, min_share: float = 0.0) -> torch.Tensor:
+def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int, min_share: float = 0.0,
+                        x2: torch.Tensor | None = None) -> torch.Tensor:
     """``(1, 1, H, W)`` negative log-likelihood (times 2, up to a constant) of each pixel of ``x (1, C, H, W)``
     under the diagonal Gaussian of the pixels ``w`` near it (:func:`_local_moments` of ``x`` and ``x^2`` in one
-    box filter; variance floor :data:`VARIANCE_FLOOR`)."""
-    mu, ex2 = _local_moments(w, [x, x * x], r, min_share)
+    box filter; variance floor :data:`VARIANCE_FLOOR`). ``x2``: ``x * x``, when the caller has it."""
+    mu, ex2 = _local_moments(w, [x, x * x if x2 is None else x2], r, min_share)
     var = (ex2 - mu * mu).clamp_min(0) + VARIANCE_FLOOR
     return ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
 
