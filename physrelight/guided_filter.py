@@ -17,6 +17,8 @@ import math
 import torch
 import torch.nn.functional as F
 
+from physrelight.parallel import thread_map
+
 __all__ = ["box_filter", "cumsum", "guided_filter", "guided_upsample"]
 
 
@@ -48,14 +50,15 @@ def cumsum(x: torch.Tensor, dim: int) -> torch.Tensor:
     return acc.movedim(0, dim).to(x.dtype)
 
 
-def _window_sums(x: torch.Tensor, radius: int, dim: int) -> torch.Tensor:
-    """Sums of ``x`` over ``[i - r, i + r]`` along ``dim``, the window cut at the ends (cumulative sums: O(1) per pixel)."""
+def _window_sums(x: torch.Tensor, radius: int, dim: int, out: torch.Tensor | None = None) -> torch.Tensor:
+    """Sums of ``x`` over ``[i - r, i + r]`` along ``dim``, the window cut at the ends (cumulative sums: O(1) per pixel),
+    into ``out`` (``x``'s shape and dtype; None: a new tensor)."""
     n = x.shape[dim]
     c = cumsum(x, dim)  # c[k] = x[0] + ... + x[k]
     r = min(radius, n)
     # sum = c[min(i + r, n - 1)] - c[i - r - 1] (0 for i <= r), written in place into one output by slicing: no
     # padded copy of c and no concatenation (twice as fast on a 12-megapixel image as building both ends by cat)
-    out = torch.empty_like(c)
+    out = torch.empty_like(c) if out is None else out
     if n - r > 0:
         out.narrow(dim, 0, n - r).copy_(c.narrow(dim, r, n - r))
     tail = out.narrow(dim, n - r, r)
@@ -99,12 +102,34 @@ def box_filter(x: torch.Tensor, radius: int) -> torch.Tensor:
         rows = F.avg_pool2d(x, (1, k), stride=1, padding=(0, radius), count_include_pad=False)
         return F.avg_pool2d(rows, (k, 1), stride=1, padding=(radius, 0), count_include_pad=False)
     h, w = x.shape[-2:]
-    if x.dtype in (torch.float32, torch.float64):
-        count = _window_count(h, w, radius, x.dtype, x.device)
-    else:  # cumsum's own precision: count as the sums are made
+    if x.dtype not in (torch.float32, torch.float64):  # cumsum's own precision: count as the sums are made
         count = _window_sums(_window_sums(torch.ones(1, 1, h, w, dtype=x.dtype, device=x.device), radius, -2),
                              radius, -1)
-    return _window_sums(_window_sums(x, radius, -2), radius, -1) / count
+        return _window_sums(_window_sums(x, radius, -2), radius, -1) / count
+    count = _window_count(h, w, radius, x.dtype, x.device)
+    k = min(torch.get_num_threads(), h, w)
+    if k <= 1 or h * w < _STRIP_MIN_PIXELS:
+        return _window_sums(_window_sums(x, radius, -2), radius, -1) / count
+    # on threads (physrelight.parallel): the column pass by strips of columns, the row pass by strips of rows; each
+    # pixel's sums are made as in one piece, so the numbers are the same at any thread count
+    cols, out = torch.empty_like(x), torch.empty_like(x)
+    thread_map(lambda s: _window_sums(x[..., s], radius, -2, out=cols[..., s]), _strips(w, k))
+
+    def rows(s: slice) -> None:
+        _window_sums(cols[..., s, :], radius, -1, out=out[..., s, :]).div_(count[..., s, :])
+
+    thread_map(rows, _strips(h, k))
+    return out
+
+
+_STRIP_MIN_PIXELS = 1 << 18
+"""Below this many pixels :func:`box_filter` runs in one piece: threads would cost more than they save."""
+
+
+def _strips(n: int, k: int) -> list[slice]:
+    """``k`` contiguous slices of near-equal length covering ``range(n)``."""
+    edges = [round(i * n / k) for i in range(k + 1)]
+    return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
 def guided_filter(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> torch.Tensor:
