@@ -87,9 +87,20 @@ def is_monochrome(image: torch.Tensor) -> bool:
     colour by this test.
     """
     check_rgb_batch(image)
-    d = colour.to_ldr(image[0].clamp_min(0.0))
-    spread = d.amax(0) - d.amin(0)
-    return float((spread > MONOCHROME_TOLERANCE).float().mean()) <= MONOCHROME_MAX_SHARE
+    h, w = image.shape[-2:]
+    most = MONOCHROME_MAX_SHARE * h * w
+    coloured = 0
+    # by strips of rows, stopping as soon as too many pixels are coloured: a colour photo is known from its first
+    # strip, so a 12-megapixel one is not converted to display values whole
+    for r0 in range(0, h, _MONOCHROME_STRIP):
+        d = colour.to_ldr(image[0, :, r0: r0 + _MONOCHROME_STRIP].clamp_min(0.0))
+        coloured += int(((d.amax(0) - d.amin(0)) > MONOCHROME_TOLERANCE).sum())
+        if coloured > most:
+            return False
+    return True
+
+
+_MONOCHROME_STRIP = 256
 
 
 def label_components(mask: torch.Tensor) -> torch.Tensor:
