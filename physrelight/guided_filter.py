@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -39,15 +40,17 @@ def _check(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> N
 
 def cumsum(x: torch.Tensor, dim: int) -> torch.Tensor:
     """``torch.cumsum(x, dim)``, the same numbers. Along a dimension other than the last, torch's CPU kernel strides
-    through memory (four times slower than along rows on a 12-megapixel image), so the running sum is added one
-    slice at a time instead, each slice contiguous, in float64 as torch accumulates float32 and float64."""
+    through memory (four times slower than along rows on a 12-megapixel image), so numpy's running sum, which adds
+    whole contiguous slices, is used instead, in float64 as torch accumulates float32 and float64. One call that
+    releases the GIL: on threads (:mod:`physrelight.parallel`) the pieces run side by side, where a Python loop
+    adding one row at a time (as this did) held the GIL between rows and two threads took twice one's time."""
     dim = dim % x.ndim
-    if dim == x.ndim - 1 or x.dtype not in (torch.float32, torch.float64) or x.shape[dim] < 2:
+    if dim == x.ndim - 1 or x.dtype not in (torch.float32, torch.float64) or x.shape[dim] < 2 or x.device.type != "cpu":
         return torch.cumsum(x, dim=dim)
-    acc = x.to(torch.float64, copy=True).movedim(dim, 0)
-    for i in range(1, acc.shape[0]):
-        acc[i] += acc[i - 1]
-    return acc.movedim(0, dim).to(x.dtype)
+    acc = x.detach().to(torch.float64, copy=True)
+    a = acc.numpy()
+    np.cumsum(a, axis=dim, out=a)
+    return acc.to(x.dtype)
 
 
 def _window_sums(x: torch.Tensor, radius: int, dim: int, out: torch.Tensor | None = None) -> torch.Tensor:
