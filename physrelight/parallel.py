@@ -9,13 +9,14 @@ the same result at any thread count.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from typing import TypeVar
 
 import torch
 
-__all__ = ["thread_map"]
+__all__ = ["single_threaded", "thread_map"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -44,3 +45,19 @@ def thread_map(fn: Callable[[T], R], items: Iterable[T], threads: int | None = N
             return list(pool.map(run, items))
     finally:
         torch.set_num_threads(caller)  # a worker's setting must not become the process's
+
+
+@contextmanager
+def single_threaded() -> Iterator[None]:
+    """Run the block with torch on one thread, the caller's setting restored after (also on an error).
+
+    For small work, such as the networks at their working resolution (64 to 128 pixels): there a parallel region
+    costs more in hand-over than it saves, and on a busy machine each waits for a descheduled thread. Measured on
+    the 12-megapixel relight with two threads (2-core AMD EPYC, load 3.3-3.6): the decomposition took 1.9 s and
+    the relighting 1.8 s, against 0.03 and 0.02 s on one thread."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)

@@ -61,3 +61,15 @@ def test_04_a_panorama_view_is_the_same_to_the_bit_on_one_thread_and_on_two(two_
         one = panorama.view(env, K, R, 200, 300, 2, chunk_rays=5000, interpolation=interpolation)
         torch.set_num_threads(2)
         assert torch.equal(one, two)
+
+
+def test_05_single_threaded_runs_torch_on_one_thread_and_restores_the_callers_setting(two_threads) -> None:
+    from physrelight.parallel import single_threaded
+
+    with single_threaded():
+        assert torch.get_num_threads() == 1
+    assert torch.get_num_threads() == 2
+    with pytest.raises(RuntimeError, match="inside"):
+        with single_threaded():
+            raise RuntimeError("inside")
+    assert torch.get_num_threads() == 2
