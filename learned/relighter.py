@@ -96,7 +96,7 @@ class Relighter:
     Use :meth:`load`; the constructor takes ready modules and the tuning (:class:`RelightOptions`, read-only
     afterwards: :meth:`with_options` gives a variant). :attr:`on_stage`, called with the name of each stage of a
     relighting as it starts (:data:`RELIGHT_STAGES`), is for a progress display (a 4000 x 2669 photo takes
-    about 40 s at one thread); None: silent.
+    about 12 s at one thread from the command line, docs/bench.md); None: silent.
     """
 
     def __init__(self, inverse: InverseNet, shadow_net: ShadowNet, prior: LightingPrior, res: int = 64,
