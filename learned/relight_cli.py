@@ -257,9 +257,11 @@ def _relight(args: argparse.Namespace) -> int:
     import torch
 
     from physrelight import io
+    from physrelight.cli_common import keep_freed_memory
     from physrelight.exposure import parse_exposure
 
     torch.set_num_threads(args.threads)
+    keep_freed_memory()  # full-size temporaries reused, not page-faulted in anew: half the CPU time on 12 MP
     out = Path(args.output)
     if args.sequence and args.layers is not None:
         raise ValueError("--layers writes the layers of one relit photo; it does not go with --sequence")

@@ -42,6 +42,7 @@ from physrelight.full_resolution import transfer_to_full_resolution, working_res
 from physrelight.horizon import photo_camera
 from physrelight.image_input import as_image, as_mask, as_radiance, give_back
 from physrelight.lighting_prior import LightingPrior
+from physrelight.parallel import single_threaded
 from physrelight.quotient import quotient_relight
 from physrelight.sky_view import rendered_sky
 from physrelight.target_lighting import as_lighting_batch, camera_target, read_target, sky_map_kind
@@ -118,7 +119,7 @@ class Relighter:
     Use :meth:`load`; the constructor takes ready modules and the tuning (:class:`RelightOptions`, read-only
     afterwards: :meth:`with_options` gives a variant). :attr:`on_stage`, called with the name of each stage of a
     relighting as it starts (:data:`RELIGHT_STAGES`), is for a progress display (a 4000 x 2669 photo takes
-    about 40 s at one thread); None: silent.
+    about 12 s at one thread from the command line, docs/bench.md); None: silent.
     """
 
     def __init__(self, inverse: InverseNet, shadow_net: ShadowNet, prior: LightingPrior, res: int = 64,
@@ -421,8 +422,9 @@ class Relighter:
         """
         clean = self.denoised(image) if denoised is None else denoised  # the foreground is relit from it
         small, small_sky = working_resolution(clean, sky, self.res if working_res is None else working_res)
-        out = self.relight_linear(small, small_sky, target, source_lighting=source_lighting, method=method,
-                                  decomposition=decomposition, known_source=known_source, **sun)
+        with single_threaded():  # 64 px: threads cost more than they save (physrelight.parallel.single_threaded)
+            out = self.relight_linear(small, small_sky, target, source_lighting=source_lighting, method=method,
+                                      decomposition=decomposition, known_source=known_source, **sun)
         relit = torch.where(sky, image, transfer_to_full_resolution(clean, small, out["relit"]))
         return {"relit": relit, "working": out, "working_image": small, "working_sky": small_sky}
 

@@ -28,6 +28,7 @@ from torch import nn
 
 from physrelight import colour, sky_mask
 from physrelight.filters import gaussian_blur
+from physrelight.parallel import single_threaded
 
 from . import checkpoint as ckpt
 from .data import resize_short_side
@@ -379,7 +380,7 @@ def sky_mask_full_resolution(model: SkySegmenter, image: torch.Tensor,
     param = next(model.parameters())
     smalls = [image.to(param.dtype) if r is None else resize_short_side(image.to(param.dtype), r) for r in sizes]
     small = max(smalls, key=lambda x: x.shape[-2] * x.shape[-1])
-    with torch.no_grad():
+    with torch.no_grad(), single_threaded():  # a working-size network: one thread (physrelight.parallel)
         # Several sizes: the coarse run sees the scene whole, the fine one keeps thin structures.
         prob = torch.stack([F.interpolate(torch.sigmoid(model(x)), size=small.shape[-2:], mode="bilinear",
                                           align_corners=False) if x.shape[-2:] != small.shape[-2:]

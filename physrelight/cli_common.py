@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 __all__ = ["MEMORY_FRACTION", "SETUP_COMMAND", "MissingExtra", "MissingSetup", "available_memory",
-           "check_fits_in_memory", "check_not_input", "check_output_file", "check_output_folder", "check_outputs", "finite_number", "missing_requirements",
+           "check_fits_in_memory", "check_not_input", "keep_freed_memory", "check_output_file", "check_output_folder", "check_outputs", "finite_number", "missing_requirements",
            "number_in", "positive_int", "positive_number", "require_extras"]
 
 MEMORY_FRACTION = 0.5
@@ -295,3 +295,33 @@ def check_fits_in_memory(needed: int, what: str, fraction: float = MEMORY_FRACTI
     if needed > fraction * avail:
         raise ValueError(f"{what} needs about {_gib(needed)} of memory, more than {fraction:.0%} of the "
                          f"{_gib(avail)} available")
+
+
+def keep_freed_memory() -> bool:
+    """Let this process's C allocator keep the memory it frees for its next allocations (glibc's ``mallopt``: no
+    ``mmap`` per block, freed memory not trimmed below 2 GiB, one arena for every thread); False where the C library
+    is not glibc (nothing changes).
+
+    glibc serves a block over its mmap threshold (a few MiB: any full-size plane of a photo) by a fresh ``mmap`` and
+    returns it on free, so every full-size temporary of a large relight is page-faulted in anew: half of a
+    12-megapixel ``relight``'s CPU time was the kernel zeroing pages (18.5 s system against 15.6 s user, one
+    thread; docs/bench.md, "Speed of relight"). Kept, the blocks are reused. The cost is memory the process
+    holds after a peak (a 12-megapixel relight's peak resident memory went from 2.6 to 3.1 GB). One arena: a worker
+    thread's own arena (:mod:`physrelight.parallel`) cannot hold a full-size plane and would map each one afresh
+    (two threads were slower than one without it). Process-wide, so called by the commands that need it
+    (``relight``), not by the library."""
+    import ctypes
+    import ctypes.util
+
+    name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(name) if name else None
+        mallopt = libc.mallopt if libc is not None else None
+        gnu = libc.gnu_get_libc_version if libc is not None else None
+    except (OSError, AttributeError):
+        return False
+    if mallopt is None or gnu is None:
+        return False
+    m_trim_threshold, m_mmap_max, m_arena_max = -1, -4, -8  # malloc.h
+    return all([bool(mallopt(m_mmap_max, 0)), bool(mallopt(m_trim_threshold, 2**31 - 1)),
+                bool(mallopt(m_arena_max, 1))])

@@ -282,11 +282,13 @@ def sample_bspline(env: Array, dirs: Array) -> Array:
     x0, y0 = x0.long(), y0.long()
     flat = e.reshape(h * w, -1)
     out = torch.zeros(*d.shape[:-1], flat.shape[-1], dtype=e.dtype)
+    rows = [(y0 + (a - 1)).clamp(0, h - 1) * w for a in range(4)]
+    cols = [(x0 + (b - 1)) % w for b in range(4)]
     for a in range(4):
-        row = (y0 + (a - 1)).clamp(0, h - 1) * w
         for b in range(4):
-            col = (x0 + (b - 1)) % w
-            out += (wy[a] * wx[b])[..., None] * flat[row + col]
+            # index_select gathers whole texels (rows of flat) faster than advanced indexing, the same values
+            texels = flat.index_select(0, (rows[a] + cols[b]).reshape(-1)).reshape(out.shape)
+            out += (wy[a] * wx[b])[..., None] * texels
     # at a pole (y = 0 or H - 1, the weights 1/6, 4/6, 1/6 with the outer row clamped to the pole's)
     means = e.mean(dim=1)
     north = (5 * means[0] + means[1]) / 6

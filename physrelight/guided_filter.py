@@ -14,8 +14,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 import torch.nn.functional as F
+
+from physrelight.parallel import thread_map
 
 __all__ = ["box_filter", "cumsum", "guided_filter", "guided_upsample"]
 
@@ -37,25 +40,27 @@ def _check(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> N
 
 def cumsum(x: torch.Tensor, dim: int) -> torch.Tensor:
     """``torch.cumsum(x, dim)``, the same numbers. Along a dimension other than the last, torch's CPU kernel strides
-    through memory (four times slower than along rows on a 12-megapixel image), so the running sum is added one
-    slice at a time instead, each slice contiguous, in float64 as torch accumulates float32 and float64."""
+    through memory (four times slower than along rows on a 12-megapixel image), so numpy's running sum, which adds
+    whole contiguous slices, is used instead, in float64 as torch accumulates float32 and float64. One call that
+    releases the GIL: on threads (:mod:`physrelight.parallel`) the pieces run side by side, where a Python loop
+    adding one row at a time (as this did) held the GIL between rows and two threads took twice one's time."""
     dim = dim % x.ndim
-    if dim == x.ndim - 1 or x.dtype not in (torch.float32, torch.float64) or x.shape[dim] < 2:
+    if dim == x.ndim - 1 or x.dtype not in (torch.float32, torch.float64) or x.shape[dim] < 2 or x.device.type != "cpu":
         return torch.cumsum(x, dim=dim)
-    acc = x.to(torch.float64, copy=True).movedim(dim, 0)
-    for i in range(1, acc.shape[0]):
-        acc[i] += acc[i - 1]
-    return acc.movedim(0, dim).to(x.dtype)
+    a = x.detach().numpy().astype(np.float64)  # a copy (numpy's cast: faster here than torch's)
+    np.cumsum(a, axis=dim, out=a)  # in place, whole slices at a time (widening while adding is slower: buffered)
+    return torch.from_numpy(a).to(x.dtype)
 
 
-def _window_sums(x: torch.Tensor, radius: int, dim: int) -> torch.Tensor:
-    """Sums of ``x`` over ``[i - r, i + r]`` along ``dim``, the window cut at the ends (cumulative sums: O(1) per pixel)."""
+def _window_sums(x: torch.Tensor, radius: int, dim: int, out: torch.Tensor | None = None) -> torch.Tensor:
+    """Sums of ``x`` over ``[i - r, i + r]`` along ``dim``, the window cut at the ends (cumulative sums: O(1) per pixel),
+    into ``out`` (``x``'s shape and dtype; None: a new tensor)."""
     n = x.shape[dim]
     c = cumsum(x, dim)  # c[k] = x[0] + ... + x[k]
     r = min(radius, n)
     # sum = c[min(i + r, n - 1)] - c[i - r - 1] (0 for i <= r), written in place into one output by slicing: no
     # padded copy of c and no concatenation (twice as fast on a 12-megapixel image as building both ends by cat)
-    out = torch.empty_like(c)
+    out = torch.empty_like(c) if out is None else out
     if n - r > 0:
         out.narrow(dim, 0, n - r).copy_(c.narrow(dim, r, n - r))
     tail = out.narrow(dim, n - r, r)
@@ -67,6 +72,28 @@ def _window_sums(x: torch.Tensor, radius: int, dim: int) -> torch.Tensor:
 
 _POOL_MAX_RADIUS = 16
 """Up to this radius :func:`box_filter` averages directly (two separable pools), beyond it by summed-area tables."""
+
+
+def _window_count(h: int, w: int, radius: int, dtype: torch.dtype, device: torch.device | str = "cpu") -> torch.Tensor:
+    """The pixel counts of the ``(2r+1)^2`` windows (cut at the border) of an ``h x w`` image, the very numbers in
+    ``dtype`` that the summed-area path of :func:`box_filter` gets by filtering ones: ``(1, 1, h, w)``.
+
+    Along the columns the ones sum to exact integers ``n_i``; along the rows their running sums ``(j + 1) * n_i`` are
+    rounded to ``dtype`` (in float32 past ``2**24``: a row of 15000 pixels at radius 600) before the window's two ends
+    are subtracted, as the filter does, so the counts are computed here the same way, without two passes of
+    summed-area tables over a plane of ones (a third of a guided filter's box sums)."""
+    rh, rw = min(radius, h), min(radius, w)
+    i = torch.arange(h, dtype=torch.float64, device=device)[:, None]
+    j = torch.arange(w, dtype=torch.float64, device=device)[None, :]
+    n_i = torch.minimum(i + rh, torch.full_like(i, h - 1)) - torch.maximum(i - rh - 1, torch.full_like(i, -1.0))
+    if w * float(n_i.max()) <= 2.0 ** (24 if dtype == torch.float32 else 53):
+        # no running sum is rounded: the counts are the exact products of the column and row counts
+        m_j = torch.minimum(j + rw, torch.full_like(j, w - 1)) - torch.maximum(j - rw - 1, torch.full_like(j, -1.0))
+        return (n_i.to(dtype) * m_j.to(dtype))[None, None]
+    hi = torch.minimum(j + rw, torch.full_like(j, w - 1))
+    lo = j - rw - 1  # the running sum before the window; none (0) at the left border
+    before = torch.where(lo >= 0, (lo + 1) * n_i, torch.zeros(()))
+    return (((hi + 1) * n_i).to(dtype) - before.to(dtype))[None, None]
 
 
 def box_filter(x: torch.Tensor, radius: int) -> torch.Tensor:
@@ -81,9 +108,34 @@ def box_filter(x: torch.Tensor, radius: int) -> torch.Tensor:
         rows = F.avg_pool2d(x, (1, k), stride=1, padding=(0, radius), count_include_pad=False)
         return F.avg_pool2d(rows, (k, 1), stride=1, padding=(radius, 0), count_include_pad=False)
     h, w = x.shape[-2:]
-    ones = torch.ones(1, 1, h, w, dtype=x.dtype, device=x.device)
-    count = _window_sums(_window_sums(ones, radius, -2), radius, -1)
-    return _window_sums(_window_sums(x, radius, -2), radius, -1) / count
+    if x.dtype not in (torch.float32, torch.float64):  # cumsum's own precision: count as the sums are made
+        count = _window_sums(_window_sums(torch.ones(1, 1, h, w, dtype=x.dtype, device=x.device), radius, -2),
+                             radius, -1)
+        return _window_sums(_window_sums(x, radius, -2), radius, -1) / count
+    count = _window_count(h, w, radius, x.dtype, x.device)
+    k = min(torch.get_num_threads(), h, w)
+    if k <= 1 or h * w < _STRIP_MIN_PIXELS:
+        return _window_sums(_window_sums(x, radius, -2), radius, -1) / count
+    # on threads (physrelight.parallel): the column pass by strips of columns, the row pass by strips of rows; each
+    # pixel's sums are made as in one piece, so the numbers are the same at any thread count
+    cols, out = torch.empty_like(x), torch.empty_like(x)
+    thread_map(lambda s: _window_sums(x[..., s], radius, -2, out=cols[..., s]), _strips(w, k))
+
+    def rows(s: slice) -> None:
+        _window_sums(cols[..., s, :], radius, -1, out=out[..., s, :]).div_(count[..., s, :])
+
+    thread_map(rows, _strips(h, k))
+    return out
+
+
+_STRIP_MIN_PIXELS = 1 << 18
+"""Below this many pixels :func:`box_filter` runs in one piece: threads would cost more than they save."""
+
+
+def _strips(n: int, k: int) -> list[slice]:
+    """``k`` contiguous slices of near-equal length covering ``range(n)``."""
+    edges = [round(i * n / k) for i in range(k + 1)]
+    return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
 def guided_filter(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> torch.Tensor:

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
+import torch
 
 from physrelight._checks import Array, to_tensor
 
@@ -381,14 +382,15 @@ def write_png(path: str | os.PathLike, image: Array) -> None:
     from PIL import Image
 
     t, _ = to_tensor(image, "image")
-    arr = t.detach().cpu().numpy()
-    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[-1] not in (1, 2, 3, 4)):
-        raise ValueError(f"image must have shape (H, W) or (H, W, C) with C in 1-4, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    t = t.detach().cpu()
+    if t.ndim not in (2, 3) or (t.ndim == 3 and t.shape[-1] not in (1, 2, 3, 4)):
+        raise ValueError(f"image must have shape (H, W) or (H, W, C) with C in 1-4, got {tuple(t.shape)}")
+    if not bool(torch.isfinite(t).all()):
         raise ValueError("image holds NaN or inf")
-    if arr.ndim == 3 and arr.shape[-1] == 1:
-        arr = arr[..., 0]
-    u8 = np.clip(np.round(arr * 255.0), 0, 255).astype(np.uint8)
+    if t.ndim == 3 and t.shape[-1] == 1:
+        t = t[..., 0]
+    # by torch's kernels (on its threads): the same bytes as numpy's round-half-to-even of x * 255 in x's dtype
+    u8 = torch.round(t * 255.0).clamp_(0, 255).to(torch.uint8).numpy()
     with atomic_path(path, ".png") as tmp:
         Image.fromarray(u8).save(tmp, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
 

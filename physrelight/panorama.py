@@ -32,6 +32,7 @@ import torch
 from physrelight import envmap
 from physrelight._checks import Array, check_finite, check_rotation, to_tensor
 from physrelight.camera import intrinsics_from_fov, look_at
+from physrelight.parallel import thread_map
 
 __all__ = ["INTERPOLATIONS", "MAX_FOV_DEG", "camera_rays", "level_camera", "look_up", "native_width",
            "texel_magnification", "view", "view_intrinsics", "view_mask"]
@@ -169,11 +170,13 @@ def view(env: Array, K: Array, world_to_camera: Array, height: int, width: int, 
     envmap.check_envmap(e, "env")
     _check_size(height, width, samples)
     rows_per_chunk = max(1, chunk_rays // (width * samples * samples))
-    out = []
-    for r0 in range(0, height, rows_per_chunk):
+
+    def chunk(r0: int) -> torch.Tensor:
         d = camera_rays(K, world_to_camera, height, width, samples, slice(r0, min(height, r0 + rows_per_chunk)))
-        out.append(look_up(e, d, interpolation))
-    return restore(torch.cat(out, dim=0))
+        return look_up(e, d, interpolation)
+
+    # the chunks are independent: on torch's threads (physrelight.parallel), the same pixels as one after another
+    return restore(torch.cat(thread_map(chunk, range(0, height, rows_per_chunk)), dim=0))
 
 
 def look_up(env: torch.Tensor, rays: torch.Tensor, interpolation: str = "bilinear") -> torch.Tensor:

@@ -21,6 +21,7 @@ import torch
 import torch.nn.functional as F
 
 from physrelight import colour
+from physrelight.parallel import thread_map
 
 __all__ = ["COLOUR_MIN_BLUE_OVER_RED", "GROW_CHI2", "GROW_ERODE", "GROW_MAX_SPREAD", "GROW_REACH", "MIN_SKY_FRACTION",
            "MIN_SURE_SHARE", "MONOCHROME_MAX_SHARE", "MONOCHROME_TOLERANCE", "REFINEMENT", "REFINEMENTS",
@@ -87,9 +88,20 @@ def is_monochrome(image: torch.Tensor) -> bool:
     colour by this test.
     """
     check_rgb_batch(image)
-    d = colour.to_ldr(image[0].clamp_min(0.0))
-    spread = d.amax(0) - d.amin(0)
-    return float((spread > MONOCHROME_TOLERANCE).float().mean()) <= MONOCHROME_MAX_SHARE
+    h, w = image.shape[-2:]
+    most = MONOCHROME_MAX_SHARE * h * w
+    coloured = 0
+    # by strips of rows, stopping as soon as too many pixels are coloured: a colour photo is known from its first
+    # strip, so a 12-megapixel one is not converted to display values whole
+    for r0 in range(0, h, _MONOCHROME_STRIP):
+        d = colour.to_ldr(image[0, :, r0: r0 + _MONOCHROME_STRIP].clamp_min(0.0))
+        coloured += int(((d.amax(0) - d.amin(0)) > MONOCHROME_TOLERANCE).sum())
+        if coloured > most:
+            return False
+    return True
+
+
+_MONOCHROME_STRIP = 256
 
 
 def label_components(mask: torch.Tensor) -> torch.Tensor:
@@ -315,7 +327,9 @@ def refine_sky_boundary(sky: torch.Tensor, image: torch.Tensor, band: int, refin
         d_fg = ((x - _local_mean(sure_fg, x, r, min_share)) ** 2).sum(1, keepdim=True)
     else:
         # "gauss": a diagonal Gaussian per side, so a smooth sky does not claim a varied foreground's outliers
-        d_sky, d_fg = _local_gaussian_nll(x, sure_sky, r, min_share), _local_gaussian_nll(x, sure_fg, r, min_share)
+        # the two sides are independent: one per thread (physrelight.parallel), the numbers of one after the other
+        x2 = x * x
+        d_sky, d_fg = thread_map(lambda w: _local_gaussian_nll(x, w, r, min_share, x2), [sure_sky, sure_fg])
     return torch.where(near, d_sky < d_fg, sky)
 
 
@@ -344,11 +358,12 @@ def _local_mean(w: torch.Tensor, v: torch.Tensor, r: int, min_share: float = 0.0
     return _local_moments(w, [v], r, min_share)[0]
 
 
-def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int, min_share: float = 0.0) -> torch.Tensor:
+def _local_gaussian_nll(x: torch.Tensor, w: torch.Tensor, r: int, min_share: float = 0.0,
+                        x2: torch.Tensor | None = None) -> torch.Tensor:
     """``(1, 1, H, W)`` negative log-likelihood (times 2, up to a constant) of each pixel of ``x (1, C, H, W)``
     under the diagonal Gaussian of the pixels ``w`` near it (:func:`_local_moments` of ``x`` and ``x^2`` in one
-    box filter; variance floor :data:`VARIANCE_FLOOR`)."""
-    mu, ex2 = _local_moments(w, [x, x * x], r, min_share)
+    box filter; variance floor :data:`VARIANCE_FLOOR`). ``x2``: ``x * x``, when the caller has it."""
+    mu, ex2 = _local_moments(w, [x, x * x if x2 is None else x2], r, min_share)
     var = (ex2 - mu * mu).clamp_min(0) + VARIANCE_FLOOR
     return ((x - mu) ** 2 / var + torch.log(var)).sum(1, keepdim=True)
 
@@ -373,12 +388,20 @@ def _local_gaussian_nll_at(x: torch.Tensor, w: torch.Tensor, r: int, index: torc
         sat = F.pad(cumsum(plane, 0).cumsum(1), (1, 0, 1, 0))
         return sat[y1, x1] - sat[y0, x1] - sat[y1, x0] + sat[y0, x0], sat[-1, -1]
 
-    n, n_all = window_sums(wt)
+    def plane(k: int) -> torch.Tensor:
+        """The weight, then per channel ``x w`` and ``x^2 w``."""
+        if k == 0:
+            return wt
+        ch, power = divmod(k - 1, 2)
+        return xd[ch] * wt if power == 0 else xd[ch] * xd[ch] * wt
+
+    # each plane's table on its own thread (physrelight.parallel), made and dropped there: the same sums
+    sums = thread_map(lambda k: window_sums(plane(k)), range(1 + 2 * c))
+    n, n_all = sums[0]
     near = n > 0
     out = torch.zeros(index.numel(), dtype=torch.float64)
     for ch in range(c):
-        s1, t1 = window_sums(xd[ch] * wt)
-        s2, t2 = window_sums(xd[ch] * xd[ch] * wt)
+        (s1, t1), (s2, t2) = sums[1 + 2 * ch], sums[2 + 2 * ch]
         mu = torch.where(near, s1 / n.clamp_min(1e-12), t1 / n_all)
         var = (torch.where(near, s2 / n.clamp_min(1e-12), t2 / n_all) - mu * mu).clamp_min(0) + VARIANCE_FLOOR
         out += (xd[ch].flatten()[index] - mu) ** 2 / var + torch.log(var)

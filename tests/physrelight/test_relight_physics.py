@@ -97,6 +97,23 @@ def test_04c_the_box_filters_cumulative_sums_are_torchs_to_the_bit(dtype) -> Non
             assert torch.equal(guided_filter.cumsum(x, d), torch.cumsum(x, d))
 
 
+@pytest.mark.parametrize("h, w, radius, dtype", [(37, 53, 17, torch.float32), (5, 90, 200, torch.float64),
+                                                  (64, 3, 26, torch.float32), (1300, 15000, 600, torch.float32)])
+def test_04d_the_box_filters_window_counts_are_those_of_a_plane_of_ones_to_the_bit(h, w, radius, dtype) -> None:
+    """The summed-area path divides by window counts computed from their closed form (``_window_count``), not by
+    filtering a plane of ones; they are those very numbers, also where a row's running sums of the column counts pass
+    ``2**24`` and float32 rounds them (15000 columns of 1201-pixel counts), so the box filter's output is unchanged
+    bit for bit."""
+    ones = torch.ones(1, 1, h, w, dtype=dtype)
+    filtered = guided_filter._window_sums(guided_filter._window_sums(ones, radius, -2), radius, -1)
+    assert torch.equal(guided_filter._window_count(h, w, radius, dtype), filtered)
+    if w * min(h, 2 * radius + 1) > 2**24:  # the rounding the closed form must reproduce is there: not the exact counts
+        def n(size: int) -> torch.Tensor:
+            i = torch.arange(size, dtype=torch.float64)
+            return (i + radius).clamp_max(size - 1) - (i - radius).clamp_min(0) + 1
+        assert not torch.equal(filtered.double()[0, 0], n(h)[:, None] * n(w)[None, :])
+
+
 def test_05_guided_upsampling_keeps_a_step_edge_within_one_pixel() -> None:
     """A mask brought up 8x from a working resolution, guided by the full-resolution photo's step:
     its 1/2 crossing lands within a pixel of the photo's edge."""

@@ -367,3 +367,18 @@ def test_14_the_wide_dilation_by_running_maxima_is_the_window_counts(r: int) -> 
         share = box_filter(m.to(torch.float64), min(r, max(h, w)))
         assert torch.equal(_dilate(m, r), share > 0)
         assert torch.equal(_boundary_band(m, r), (share > 0) & (share < 1))
+
+
+def test_15_monochrome_counts_every_strip_and_stops_only_past_the_share() -> None:
+    """:func:`is_monochrome` reads the photo by strips of rows and stops once more than
+    ``MONOCHROME_MAX_SHARE`` of the pixels are coloured; coloured pixels in the last strip alone count, and the
+    verdict flips exactly where the share of coloured pixels passes the limit."""
+    from physrelight import sky_mask
+
+    h, w = 700, 300  # three strips, the last one short
+    n = int(sky_mask.MONOCHROME_MAX_SHARE * h * w)  # 1050: the most coloured pixels of a monochrome photo
+    for coloured, want in ((n, True), (n + 1, False)):
+        img = torch.full((1, 3, h, w), 0.2)
+        flat = img[0, 0].view(-1)
+        flat[h * w - coloured:] = 0.6  # red, at the bottom of the photo only
+        assert sky_mask.is_monochrome(img) is want

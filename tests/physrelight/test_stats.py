@@ -82,3 +82,22 @@ def test_05_quantile_is_torchs_below_its_limit_and_the_order_statistics_above() 
         quantile(torch.zeros(0), 0.5)
     with pytest.raises(ValueError, match="q must"):
         quantile(big, 1.5)
+
+
+def test_05b_the_selected_quantile_is_torchs_to_the_bit_with_ties_nan_and_either_precision() -> None:
+    """Below the limit ``stats.quantile`` selects its two order statistics (``torch.kthvalue``) instead of sorting
+    as ``torch.quantile`` does; with torch's own rank arithmetic (``q`` in the input's dtype) it gives the same
+    number: random sizes and ``q``, rounded values (ties), float32 and float64, and NaN propagated."""
+    import torch
+
+    from physrelight.stats import quantile
+
+    g = torch.Generator().manual_seed(1)
+    for t in range(400):
+        n = int(torch.randint(1, 3000, (1,), generator=g))
+        x = torch.randn(n, generator=g, dtype=torch.float32 if t % 2 else torch.float64) * 10
+        x = x.round() if t % 3 == 0 else x
+        q = float(torch.rand(1, generator=g))
+        assert torch.equal(quantile(x, q), torch.quantile(x, q)), (t, n, q)
+    x = torch.tensor([1.0, float("nan"), 3.0])
+    assert torch.isnan(quantile(x, 0.5)) and torch.isnan(torch.quantile(x, 0.5))
