@@ -27,12 +27,7 @@ KEYS = {"schema_version", "source", "reason", "sun", "sun_spread", "sun_probabil
         "overcast_mix", "exponent", "camera", "sky_pixels", "sh_camera", "image_size"}
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _rays() -> np.ndarray:

@@ -21,12 +21,7 @@ H, W, FOV, PITCH = 120, 160, 60.0, 12.0
 SUN_ELEV, SUN_AZIM = 25.0, 10.0  # in view: 10 deg right of straight ahead
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from physrelight import sun_estimate as se
 from physrelight.colour import linear_to_srgb
@@ -17,12 +16,7 @@ from physrelight.sun_prior import fit_sun_prior, load_sun_prior
 from .mitsuba_box import azimuth_error, render_box
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _mass_near(p, azimuth: float, half: float = 20.0) -> float:

@@ -9,7 +9,6 @@ import math
 
 import numpy as np
 import pytest
-import torch
 
 from physrelight import envmap, sh
 from physrelight import sun_from_sky as sfs
@@ -73,12 +72,7 @@ def _cloud(display: np.ndarray, mask: np.ndarray, seed: int) -> np.ndarray:
     return np.where((blob & mask)[..., None], np.array([0.85, 0.85, 0.87]), display)
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def test_01_a_sun_in_view_is_found_within_5_degrees() -> None:
