@@ -299,7 +299,7 @@ def check_fits_in_memory(needed: int, what: str, fraction: float = MEMORY_FRACTI
 
 def keep_freed_memory() -> bool:
     """Let this process's C allocator keep the memory it frees for its next allocations (glibc's ``mallopt``: no
-    ``mmap`` per block, freed memory not trimmed below 2 GiB, one arena for every thread); False where the C library
+    ``mmap`` per block, freed memory never trimmed, one arena for every thread); False where the C library
     is not glibc (nothing changes).
 
     glibc serves a block over its mmap threshold (a few MiB: any full-size plane of a photo) by a fresh ``mmap`` and
@@ -308,8 +308,10 @@ def keep_freed_memory() -> bool:
     thread; docs/bench.md, "Speed of relight"). Kept, the blocks are reused. The cost is memory the process
     holds after a peak (a 12-megapixel relight's peak resident memory went from 2.6 to 3.1 GB). One arena: a worker
     thread's own arena (:mod:`physrelight.parallel`) cannot hold a full-size plane and would map each one afresh
-    (two threads were slower than one without it). Process-wide, so called by the commands that need it
-    (``relight``), not by the library."""
+    (two threads were slower than one without it). Never trimmed (``M_TRIM_THRESHOLD`` -1, glibc's "disables
+    trimming"): with a 2 GiB threshold a two-thread 12-megapixel relight still gave 2.5 GB back to the kernel in five
+    trims and faulted it in again (4.2 s of system time; 0.44 s without trimming, peak 4.5 -> 5.2 GB). Process-wide,
+    so called by the commands that need it (``relight``), not by the library."""
     import ctypes
     import ctypes.util
 
@@ -323,5 +325,5 @@ def keep_freed_memory() -> bool:
     if mallopt is None or gnu is None:
         return False
     m_trim_threshold, m_mmap_max, m_arena_max = -1, -4, -8  # malloc.h
-    return all([bool(mallopt(m_mmap_max, 0)), bool(mallopt(m_trim_threshold, 2**31 - 1)),
+    return all([bool(mallopt(m_mmap_max, 0)), bool(mallopt(m_trim_threshold, -1)),
                 bool(mallopt(m_arena_max, 1))])
