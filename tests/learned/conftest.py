@@ -9,6 +9,19 @@ import torch
 
 TINY = dict(scenes=3, views=2, lights=2, res=24, spp=4, gbuffer_spp=2, shadow_spp=2, env_resolution=16,
             kinds=("sunsky", "overcast", "hdri"))
+TINY_NET = dict(width=4, depth=2, res=24)
+
+
+def tiny_train_config(data: Path, out: Path, prior: Path, **kw):
+    """A :class:`learned.train.TrainConfig` of the inverse stage for a few steps of the tiny network on ``data``
+    (every split, one thread, seed 5, no progress bar); ``kw`` overrides any field."""
+    from learned.train import TrainConfig
+
+    base = dict(stage="inverse", data=str(data), out=str(out), prior=str(prior), train_split="all",
+                val_split="all", batch=2, steps=6, val_every=1000, val_images=4, ckpt_every=3, log_every=1,
+                threads=1, seed=5, progress=False, lr=3e-3, **TINY_NET)
+    base.update(kw)
+    return TrainConfig(**base)
 
 
 def save_weights(net: torch.nn.Module, path: Path, kind: str, **extra: str) -> Path:

@@ -18,13 +18,15 @@ import pytest
 import torch
 
 from learned.data import PairSampler, crop_square, data_notes, list_scenes, open_training_data
-from learned.train import TrainConfig, train
+from learned.train import train
 from physrelight import camera
 from physrelight import colmap_format as cf
 from physrelight.collections import Collection, find_layout
 from physrelight.collections.megadepth import read_depth_h5, write_depth_h5
 from synth.dataset import SynthDataset
 from synth.export import export
+
+from .conftest import tiny_train_config
 
 LAYOUTS = ("colmap", "megadepth")
 KEYS = ("photo", "mvs_depth", "sky_mask", "K", "world_to_camera")
@@ -106,10 +108,7 @@ def test_03_the_sampler_draws_the_same_batches(tiny_dataset: Path, exported: dic
 
 
 def _losses(data: Path, out: Path, prior: Path) -> list[dict[str, float]]:
-    cfg = TrainConfig(stage="inverse", data=str(data), out=str(out), prior=str(prior), train_split="all",
-                      val_split="all", batch=2, steps=30, val_every=1000, val_images=4, ckpt_every=1000, log_every=1,
-                      threads=1, seed=5, progress=False, lr=3e-3, width=4, depth=2, res=24)
-    train(cfg)
+    train(tiny_train_config(data, out, prior, steps=30, ckpt_every=1000))
     with (out / "train.csv").open() as f:
         return [{k: float(v) for k, v in r.items() if k not in ("seconds", "step", "time")} for r in csv.DictReader(f)]
 

@@ -27,18 +27,15 @@ from learned.data import PairSampler
 from learned.networks import InverseNet
 from learned.train import TrainConfig, train
 
-TINY_NET = dict(width=4, depth=2, res=24)
+from .conftest import tiny_train_config
+
 ROOT = Path(__file__).resolve().parents[2]
 HAS_CUDA = torch.cuda.is_available()
 HAS_MPS = bool(getattr(torch.backends, "mps", None) and torch.backends.mps.is_available())
 
 
 def config(data: Path, out: Path, prior: Path, **kw) -> TrainConfig:
-    base = dict(stage="inverse", data=str(data), out=str(out), prior=str(prior), train_split="all",
-                val_split="all", batch=2, steps=4, val_every=1000, val_images=2, ckpt_every=2, log_every=1,
-                threads=1, seed=5, progress=False, lr=3e-3, **TINY_NET)
-    base.update(kw)
-    return TrainConfig(**base)
+    return tiny_train_config(data, out, prior, **{"steps": 4, "val_images": 2, "ckpt_every": 2, **kw})
 
 
 def totals(run: Path) -> list[str]:

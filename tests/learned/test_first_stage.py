@@ -27,17 +27,9 @@ from learned.train import TrainConfig, train
 from physrelight.lighting_prior import LightingPrior
 from synth.dataset import GroundTruthAccessError
 
-from .conftest import TINY, save_weights
+from .conftest import TINY, TINY_NET, save_weights, tiny_train_config
 
-TINY_NET = dict(width=4, depth=2, res=24)
-
-
-def config(data: Path, out: Path, prior: Path, **kw) -> TrainConfig:
-    base = dict(stage="inverse", data=str(data), out=str(out), prior=str(prior), train_split="all",
-                val_split="all", batch=2, steps=6, val_every=1000, val_images=4, ckpt_every=3, log_every=1,
-                threads=1, seed=5, progress=False, lr=3e-3, **TINY_NET)
-    base.update(kw)
-    return TrainConfig(**base)
+config = tiny_train_config
 
 
 def rows(path: Path) -> list[dict[str, str]]:
