@@ -35,7 +35,7 @@ import re
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO, Callable
+from typing import Any, BinaryIO, Callable
 
 import numpy as np
 
@@ -194,21 +194,19 @@ class _Reader:
     def __init__(self, path: Path) -> None:
         self.path, self.data, self.pos = path, path.read_bytes(), 0
 
-    def take(self, fmt: str) -> tuple:
-        size = struct.calcsize("<" + fmt)
+    def _need(self, size: int) -> int:
+        """The offset of the next ``size`` bytes, which are then consumed."""
         if self.pos + size > len(self.data):
             raise ValueError(f"{self.path}: truncated (needs {size} more bytes at offset {self.pos})")
-        out = struct.unpack_from("<" + fmt, self.data, self.pos)
         self.pos += size
-        return out
+        return self.pos - size
+
+    def take(self, fmt: str) -> tuple:
+        return struct.unpack_from("<" + fmt, self.data, self._need(struct.calcsize("<" + fmt)))
 
     def array(self, dtype: np.dtype, count: int) -> np.ndarray:
-        size = np.dtype(dtype).itemsize * count
-        if self.pos + size > len(self.data):
-            raise ValueError(f"{self.path}: truncated (needs {size} more bytes at offset {self.pos})")
-        out = np.frombuffer(self.data, dtype=dtype, count=count, offset=self.pos).copy()
-        self.pos += size
-        return out
+        at = self._need(np.dtype(dtype).itemsize * count)
+        return np.frombuffer(self.data, dtype=dtype, count=count, offset=at).copy()
 
     def cstring(self) -> str:
         end = self.data.find(b"\x00", self.pos)
@@ -218,9 +216,13 @@ class _Reader:
         self.pos = end + 1
         return out
 
-    def done(self) -> None:
+    def records(self, read_one: Callable[[], tuple[int, Any]]) -> dict[int, Any]:
+        """A binary model file: a uint64 count, then that many records by ``read_one`` (each ``(id, record)``),
+        and nothing after them."""
+        out = dict(read_one() for _ in range(self.take("Q")[0]))
         if self.pos != len(self.data):
             raise ValueError(f"{self.path}: {len(self.data) - self.pos} bytes after the last record")
+        return out
 
 
 _POINT2D = np.dtype([("x", "<f8"), ("y", "<f8"), ("id", "<i8")])
@@ -229,40 +231,40 @@ _TRACK = np.dtype([("image", "<i4"), ("idx", "<i4")])
 
 def _read_cameras_bin(path: Path) -> dict[int, Camera]:
     r = _Reader(path)
-    out = {}
-    for _ in range(r.take("Q")[0]):
+
+    def one() -> tuple[int, Camera]:
         cid, mid, w, h = r.take("iiQQ")
         if mid not in CAMERA_MODELS:
             raise ValueError(f"{path}: camera {cid} has unknown model id {mid}")
         name, n = CAMERA_MODELS[mid]
-        out[cid] = Camera(cid, name, int(w), int(h), np.array(r.take("d" * n)))
-    r.done()
-    return out
+        return cid, Camera(cid, name, int(w), int(h), np.array(r.take("d" * n)))
+
+    return r.records(one)
 
 
 def _read_images_bin(path: Path) -> dict[int, Image]:
     r = _Reader(path)
-    out = {}
-    for _ in range(r.take("Q")[0]):
+
+    def one() -> tuple[int, Image]:
         props = r.take("idddddddi")
         name = r.cstring()
         pts = r.array(_POINT2D, r.take("Q")[0])
-        out[props[0]] = Image(props[0], np.array(props[1:5]), np.array(props[5:8]), props[8], name,
-                              np.stack([pts["x"], pts["y"]], 1), pts["id"].astype(np.int64))
-    r.done()
-    return out
+        return props[0], Image(props[0], np.array(props[1:5]), np.array(props[5:8]), props[8], name,
+                               np.stack([pts["x"], pts["y"]], 1), pts["id"].astype(np.int64))
+
+    return r.records(one)
 
 
 def _read_points3D_bin(path: Path) -> dict[int, Point3D]:
     r = _Reader(path)
-    out = {}
-    for _ in range(r.take("Q")[0]):
+
+    def one() -> tuple[int, Point3D]:
         props = r.take("QdddBBBd")
         track = r.array(_TRACK, r.take("Q")[0])
-        out[props[0]] = Point3D(props[0], np.array(props[1:4]), np.array(props[4:7], dtype=np.uint8), props[7],
-                                track["image"].astype(np.int64), track["idx"].astype(np.int64))
-    r.done()
-    return out
+        return props[0], Point3D(props[0], np.array(props[1:4]), np.array(props[4:7], dtype=np.uint8), props[7],
+                                 track["image"].astype(np.int64), track["idx"].astype(np.int64))
+
+    return r.records(one)
 
 
 def _write_cameras_bin(cameras: dict[int, Camera], f: BinaryIO) -> None:
