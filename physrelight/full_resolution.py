@@ -70,6 +70,8 @@ def transfer_to_full_resolution(full: torch.Tensor, small: torch.Tensor, relit_s
         ratio_up = torch.exp(log_ratio)
     else:
         ratio_up = up(ratio)
+    if bool(lit.all()):  # no black pixel: the fallback's full-size upsampling is not needed
+        return full * ratio_up
     return torch.where(lit, full * ratio_up, up(relit_small))
 
 

@@ -375,7 +375,7 @@ def _local_gaussian_nll_at(x: torch.Tensor, w: torch.Tensor, r: int, index: torc
     ``r`` and the statistics are computed only where they are asked for (the growth asks at its few candidates,
     while a window of ``4 * reach`` spans most of a large photo). The tables are float64, built one plane at a time
     (each about 0.2 GB for a 24-megapixel photo). ``x (1, C, H, W)``, ``w (1, 1, H, W)``."""
-    from physrelight.guided_filter import cumsum
+    from physrelight.window_sums import summed_area_table
 
     c, h, wd = x.shape[1], x.shape[-2], x.shape[-1]
     iy, ix = index // wd, index % wd
@@ -385,7 +385,7 @@ def _local_gaussian_nll_at(x: torch.Tensor, w: torch.Tensor, r: int, index: torc
 
     def window_sums(plane: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The sums of ``plane (H, W)`` over the windows of ``index``, and over the whole image."""
-        sat = F.pad(cumsum(plane, 0).cumsum(1), (1, 0, 1, 0))
+        sat = summed_area_table(plane)  # F.pad(cumsum(plane, 0).cumsum(1), (1, 0, 1, 0)), compiled
         return sat[y1, x1] - sat[y0, x1] - sat[y1, x0] + sat[y0, x0], sat[-1, -1]
 
     def plane(k: int) -> torch.Tensor:

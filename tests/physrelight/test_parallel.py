@@ -37,8 +37,8 @@ def test_02_an_error_in_one_piece_is_raised_to_the_caller(two_threads) -> None:
 
 
 def test_03_the_wide_box_filter_is_the_same_to_the_bit_on_one_thread_and_on_two(two_threads) -> None:
-    """Past 2**18 pixels the summed-area box filter runs its column pass by strips of columns and its row pass by
-    strips of rows on torch's threads; every pixel's sums are made as in one piece."""
+    """The summed-area box filter (:func:`physrelight.window_sums.box_mean`) runs its column pass by strips of columns
+    and its row pass by strips of rows on torch's threads; every pixel's sums are made as in one piece."""
     g = torch.Generator().manual_seed(11)
     for shape, radius, dtype in [((1, 3, 600, 701), 42, torch.float32), ((2, 1, 513, 800), 300, torch.float64)]:
         x = torch.randn(*shape, generator=g, dtype=dtype)
@@ -61,6 +61,12 @@ def test_04_a_panorama_view_is_the_same_to_the_bit_on_one_thread_and_on_two(two_
         one = panorama.view(env, K, R, 200, 300, 2, chunk_rays=5000, interpolation=interpolation)
         torch.set_num_threads(2)
         assert torch.equal(one, two)
+    # one ray per pixel by the B-spline: the compiled loop (panorama._bspline_view), by strips of rows
+    two = panorama.view(env, K, R, 200, 300, 1, interpolation="bspline")
+    torch.set_num_threads(1)
+    one = panorama.view(env, K, R, 200, 300, 1, interpolation="bspline")
+    torch.set_num_threads(2)
+    assert torch.equal(one, two)
 
 
 def test_05_single_threaded_runs_torch_on_one_thread_and_restores_the_callers_setting(two_threads) -> None:
