@@ -378,8 +378,9 @@ more bytes."""
 
 def write_png(path: str | os.PathLike, image: Array) -> None:
     """Write display values ``(H, W)``, ``(H, W, 1)``, ``(H, W, 3)`` or with alpha ``(H, W, 2)`` (grey) /
-    ``(H, W, 4)`` (RGB) in [0, 1] as an 8-bit PNG (rounded, clipped; zlib level :data:`PNG_COMPRESS_LEVEL`)."""
-    from PIL import Image
+    ``(H, W, 4)`` (RGB) in [0, 1] as an 8-bit PNG (rounded, clipped; zlib level :data:`PNG_COMPRESS_LEVEL`;
+    encoded by :func:`physrelight.png.encode_png`)."""
+    from physrelight.png import encode_png
 
     t, _ = to_tensor(image, "image")
     t = t.detach().cpu()
@@ -391,8 +392,9 @@ def write_png(path: str | os.PathLike, image: Array) -> None:
         t = t[..., 0]
     # by torch's kernels (on its threads): the same bytes as numpy's round-half-to-even of x * 255 in x's dtype
     u8 = torch.round(t * 255.0).clamp_(0, 255).to(torch.uint8).numpy()
+    data = encode_png(u8, PNG_COMPRESS_LEVEL)  # on several threads (physrelight.png)
     with atomic_path(path, ".png") as tmp:
-        Image.fromarray(u8).save(tmp, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
+        tmp.write_bytes(data)
 
 
 def write_json(path: str | os.PathLike, data: Any) -> None:
