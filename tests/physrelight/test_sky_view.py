@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from physrelight import colour, envmap, panorama
@@ -60,3 +61,33 @@ def test_02_a_low_suns_disc_is_red_as_its_light() -> None:
     want = sun_colour(4.0)
     assert want[0] > 1.5 * want[2] and disc[0] > disc[1] > disc[2]
     np.testing.assert_allclose(disc / (disc @ np.asarray(colour.LUMINANCE)), want, rtol=0.02)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_03_a_model_sky_by_strips_of_rows_is_the_sky_evaluated_in_one_piece(threads) -> None:
+    """The clear sky, the overcast sky and the fitted sky are evaluated by strips of STRIP_ROWS rows on torch's
+    threads: every pixel as the whole image evaluated at once gives it, to the bit, at any thread count."""
+    from physrelight import sky_view
+    from physrelight.sky_model import fit_sky, horizon_clamped, sky_view as model_view, sun_disc, sunsky_radiance
+    from physrelight.target_lighting import Sun, clear_sky_sun, sun_rgb, target_lighting
+
+    h, w = 2 * sky_view.STRIP_ROWS + 9, 40
+    K, R = panorama.view_intrinsics(70.0, w, h), panorama.level_camera(30.0, 20.0)
+    rays = horizon_clamped(panorama.camera_rays(K, R, h, w, 1))[..., 0, :]
+    sun = Sun(25.0, 40.0)
+    d = clear_sky_sun(sun.direction)
+    whole = torch.from_numpy(sunsky_radiance(rays.double().numpy(), d)).float()
+    whole = whole + (sun_disc(rays, d)[..., None] * torch.from_numpy(sun_rgb(d))).float()
+    from physrelight.sky_model import overcast_sky
+
+    grey = torch.from_numpy(overcast_sky(rays.double().numpy()) * overcast_level()).float()[..., None].expand(-1, -1, 3)
+    coeffs = target_lighting(sun, None, "clear")
+    fitted = model_view(fit_sky(coeffs), panorama.camera_rays(K, R, h, w, 1)).float()
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        assert torch.equal(target_sky(sun, K, R, h, w, "clear"), whole)
+        assert torch.equal(target_sky(sun, K, R, h, w, "overcast"), grey)
+        assert torch.equal(sky_view.fitted_sky(coeffs, K, R, h, w), fitted)
+    finally:
+        torch.set_num_threads(before)
