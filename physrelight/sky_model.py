@@ -101,15 +101,25 @@ def _sunsky_table() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return out
 
 
-def _bilinear(grid: np.ndarray, rows: np.ndarray, cols: np.ndarray, r: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """``grid (R, C, 3)`` on the uniform node coordinates ``rows (R,)``, ``cols (C,)`` at ``(r, c)``."""
+def _bilinear_cells(rows: np.ndarray, cols: np.ndarray, r: np.ndarray, c: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where ``(r, c)`` falls on the uniform node coordinates ``rows (R,)``, ``cols (C,)``: each point's cell as the
+    flat index ``r0 * C + c0`` of its lower corner, and its fractions ``wr, wc (..., 1)`` along rows and columns."""
     fr = np.clip((r - rows[0]) / (rows[1] - rows[0]), 0, len(rows) - 1)
     fc = np.clip((c - cols[0]) / (cols[1] - cols[0]), 0, len(cols) - 1)
     r0 = np.minimum(fr.astype(np.int64), len(rows) - 2)
     c0 = np.minimum(fc.astype(np.int64), len(cols) - 2)
-    wr, wc = (fr - r0)[..., None], (fc - c0)[..., None]
-    return ((1 - wr) * ((1 - wc) * grid[r0, c0] + wc * grid[r0, c0 + 1])
-            + wr * ((1 - wc) * grid[r0 + 1, c0] + wc * grid[r0 + 1, c0 + 1]))
+    return r0 * len(cols) + c0, (fr - r0)[..., None], (fc - c0)[..., None]
+
+
+def _bilinear(grid: np.ndarray, cells: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    """``grid (R, C, 3)`` interpolated bilinearly in the ``cells`` of :func:`_bilinear_cells` (one index per
+    corner, gathered by ``np.take``: several grids looked up at the same points share the cells)."""
+    idx, wr, wc = cells
+    flat, n = grid.reshape(-1, grid.shape[-1]), grid.shape[1]
+    g00, g01 = np.take(flat, idx, axis=0), np.take(flat, idx + 1, axis=0)
+    g10, g11 = np.take(flat, idx + n, axis=0), np.take(flat, idx + n + 1, axis=0)
+    return (1 - wr) * ((1 - wc) * g00 + wc * g01) + wr * ((1 - wc) * g10 + wc * g11)
 
 
 def sunsky_radiance(d: np.ndarray, s: Array) -> np.ndarray:
@@ -139,7 +149,8 @@ def sunsky_radiance(d: np.ndarray, s: Array) -> np.ndarray:
     phi = np.degrees(np.arccos(np.clip(cos_phi, -1.0, 1.0)))
     i = int(np.clip(np.searchsorted(elevations, e) - 1, 0, len(elevations) - 2))
     w = (e - elevations[i]) / (elevations[i + 1] - elevations[i])
-    out = (1 - w) * _bilinear(radiance[i], rows, cols, beta, phi) + w * _bilinear(radiance[i + 1], rows, cols, beta, phi)
+    cells = _bilinear_cells(rows, cols, beta, phi)  # the same cells in both tables of the sun's elevation
+    out = (1 - w) * _bilinear(radiance[i], cells) + w * _bilinear(radiance[i + 1], cells)
     return np.where(d[..., 1:2] > 0, out, 0.0)
 
 

@@ -142,13 +142,17 @@ def box_pass(photo: Path, runs: int) -> float:
     return statistics.median(times)
 
 
-def relight_once(photo: Path, out: Path, threads: int, profile: Path | None = None) -> dict[str, float]:
-    """One `physrelight relight` in this process: seconds per stage, and ``"total"``."""
+DEFAULT_TARGET = ("--env", "physrelight/data/hdri/forest.exr")
+
+
+def relight_once(photo: Path, out: Path, threads: int, profile: Path | None = None,
+                 target: tuple[str, ...] = DEFAULT_TARGET) -> dict[str, float]:
+    """One `physrelight relight` in this process (``target``: the target's arguments): seconds per stage, and
+    ``"total"``."""
     from physrelight.cli import main
 
     clock = StageClock()
-    argv = ["relight", str(photo), "--env", "physrelight/data/hdri/forest.exr", "--threads", str(threads),
-            "--quiet", "-o", str(out)]
+    argv = ["relight", str(photo), *target, "--threads", str(threads), "--quiet", "-o", str(out)]
     prof = None
     if profile is not None:
         import cProfile
@@ -184,11 +188,14 @@ def main() -> None:
     p.add_argument("--keep-output", help="copy the last relit PNG here")
     p.add_argument("--json", help="write the table as JSON here")
     p.add_argument("--profile", help="write a cProfile of the last run here")
+    p.add_argument("--sun", nargs=2, type=float, metavar=("ELEV", "AZIM"),
+                   help="relight to a clear sun (relight --sun) instead of the forest HDRI")
     args = p.parse_args()
+    target = DEFAULT_TARGET if args.sun is None else ("--sun", *(f"{x:g}" for x in args.sun))
     with tempfile.TemporaryDirectory() as tmp:
         photo = Path(args.photo) if args.photo else make_photo(Path(tmp) / "rocket_4000x2669.png")
         out = Path(tmp) / "relit.png"
-        result: dict[str, Any] = {"photo": str(args.photo or "rocket.jpg enlarged to 4000 x 2669"),
+        result: dict[str, Any] = {"photo": str(args.photo or "rocket.jpg enlarged to 4000 x 2669"), "target": list(target),
                                   "cpu": _cpu(), "runs": args.runs, "threads": {}}
         try:
             from physrelight.cli_common import keep_freed_memory
@@ -202,9 +209,9 @@ def main() -> None:
             torch.set_num_threads(threads)
             load0 = os.getloadavg()[0]
             unit = box_pass(photo, max(3, args.runs))
-            runs = [relight_once(photo, out, threads) for _ in range(args.runs)]
+            runs = [relight_once(photo, out, threads, target=target) for _ in range(args.runs)]
             if args.profile:
-                relight_once(photo, out, threads, Path(f"{args.profile}.t{threads}"))
+                relight_once(photo, out, threads, Path(f"{args.profile}.t{threads}"), target=target)
             unit_after = box_pass(photo, max(3, args.runs))
             box = statistics.median([unit, unit_after])
             names = [s for s in (*STAGES, "other (CLI, checks)", "total", "cpu user", "cpu system")
