@@ -100,8 +100,8 @@ def _strips(n: int, k: int) -> list[tuple[int, int]]:
 
 
 def box_mean(x: torch.Tensor, radius: int, count: torch.Tensor) -> torch.Tensor:
-    """Mean of ``x (B, C, H, W)`` (CPU, float32 or float64) over each pixel's ``(2r+1)^2`` window cut at the border, from
-    running sums: the numbers of :func:`physrelight.guided_filter.box_filter`'s summed-area path to the bit.
+    """Mean of ``x (B, C, H, W)`` (CPU, float32 or float64) over each pixel's ``(2r+1)^2`` window cut at the border,
+    from running sums: the numbers of :func:`physrelight.guided_filter.box_filter`'s summed-area path to the bit.
 
     Args:
         radius: the window's radius, ``>= 1``.

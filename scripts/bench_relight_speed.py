@@ -1,8 +1,8 @@
 """Where `physrelight relight` spends its time on a 12-megapixel photo, stage by stage, in seconds and in box passes.
 
 The photo is scikit-image's rocket.jpg enlarged to 4000 x 2669 (``skimage.transform.resize``, order 1, no
-anti-aliasing) and saved as a PNG; the target is the forest HDRI (``--sun ELEV AZIM``: a clear sun instead). The whole command runs in this process
-(``physrelight.cli.main``, PNG write included) at each ``--threads``; every stage is timed by wrapping the function
+anti-aliasing) and saved as a PNG; the target is the forest HDRI (``--sun ELEV AZIM``: a clear sun instead). The
+whole command runs in this process (``physrelight.cli.main``, PNG write included) at each ``--threads``; every stage is timed by wrapping the function
 that does it (self time: a stage nested in another is not counted twice). The unit is one 9 x 9 box filter pass
 over the same photo (``physrelight.guided_filter.box_filter`` on the ``(1, 3, H, W)`` float32 tensor, radius 4),
 timed in the same run at the same thread count, so the figures in passes hold on a loaded machine.
@@ -195,7 +195,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         photo = Path(args.photo) if args.photo else make_photo(Path(tmp) / "rocket_4000x2669.png")
         out = Path(tmp) / "relit.png"
-        result: dict[str, Any] = {"photo": str(args.photo or "rocket.jpg enlarged to 4000 x 2669"), "target": list(target),
+        result: dict[str, Any] = {"photo": str(args.photo or "rocket.jpg enlarged to 4000 x 2669"),
+                                  "target": list(target),
                                   "cpu": _cpu(), "runs": args.runs, "threads": {}}
         try:
             from physrelight.cli_common import keep_freed_memory
