@@ -5,7 +5,8 @@ anti-aliasing) and saved as a PNG; the target is the forest HDRI (``--sun ELEV A
 whole command runs in this process (``physrelight.cli.main``, PNG write included) at each ``--threads``; every
 stage is timed by wrapping the function that does it (self time: a stage nested in another is not counted twice).
 The unit is one 9 x 9 box filter pass over the same photo (``physrelight.guided_filter.box_filter`` on the
-``(1, 3, H, W)`` float32 tensor, radius 4), timed in the same run at the same thread count, so the figures in passes hold on a loaded machine.
+``(1, 3, H, W)`` float32 tensor, radius 4), timed in the same run at the same thread count, so the figures in passes
+hold on a loaded machine.
 
     PYTHONPATH=. .venv/bin/python scripts/bench_relight_speed.py --runs 3 --threads 1 2 --json speed.json
 
