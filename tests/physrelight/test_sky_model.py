@@ -214,3 +214,28 @@ def test_11_the_clear_sky_of_a_sun_target_is_smooth_symmetric_and_dark_below_the
     for bad in (np.zeros(3), np.ones(2)):
         with pytest.raises(ValueError, match="sun"):
             sm.sunsky_radiance(d, bad)
+
+
+def test_12_the_compiled_table_lookup_is_numpys_bilinear_blend_to_the_bit() -> None:
+    """sunsky_radiance looks its two tables (the sun's elevations either side) up at the same cells in one compiled
+    loop: the numbers numpy's expression of ``(1 - w) bilinear(a) + w bilinear(b)`` gives, to the bit, at the grid's
+    nodes, its edges (clipped) and in between."""
+    from physrelight.sky_model import _blend_bilinear, _bilinear_cells
+
+    rng = np.random.default_rng(12)
+    a, b = rng.random((31, 61, 3)) * 5, rng.random((31, 61, 3)) * 5
+    rows, cols = np.arange(31) * 3.0, np.arange(61) * 3.0
+    r = np.concatenate([rng.uniform(-5, 95, 500), rows, [90.0, 0.0]])
+    c = np.concatenate([rng.uniform(-5, 185, 500), cols[:31], [180.0, 0.0]])
+    cells = _bilinear_cells(rows, cols, r.reshape(-1, 1), c.reshape(-1, 1))
+    idx, wr, wc = cells
+
+    def bilinear(grid: np.ndarray) -> np.ndarray:
+        flat, n = grid.reshape(-1, 3), grid.shape[1]
+        g00, g01, g10, g11 = flat[idx], flat[idx + 1], flat[idx + n], flat[idx + n + 1]
+        return (1 - wr) * ((1 - wc) * g00 + wc * g01) + wr * ((1 - wc) * g10 + wc * g11)
+
+    w = 0.3712
+    got = _blend_bilinear(a, b, w, cells)
+    assert got.shape == (len(r), 1, 3)
+    assert np.array_equal(got, (1 - w) * bilinear(a) + w * bilinear(b))
