@@ -35,7 +35,7 @@ from physrelight._checks import Array, check_finite, check_rotation, to_tensor
 from physrelight.camera import intrinsics_from_fov, look_at
 from physrelight.parallel import thread_map
 
-__all__ = ["INTERPOLATIONS", "MAX_FOV_DEG", "camera_rays", "level_camera", "look_up", "native_width",
+__all__ = ["INTERPOLATIONS", "MAX_FOV_DEG", "camera_rays", "level_camera", "look_up", "native_width", "pixel_rays",
            "texel_magnification", "view", "view_intrinsics", "view_mask"]
 
 MAX_FOV_DEG = 179.0
@@ -182,6 +182,45 @@ def view(env: Array, K: Array, world_to_camera: Array, height: int, width: int, 
     return restore(torch.cat(thread_map(chunk, range(0, height, rows_per_chunk)), dim=0))
 
 
+@numba.njit(inline="always")
+def _pixel_ray(k: np.ndarray, R: np.ndarray, u: float, v: float) -> tuple[float, float, float]:  # pragma: no cover
+    """The unit world direction through image point ``(u, v)`` (pixel units) of a camera with inverse intrinsics
+    ``k (3, 3)`` and world-to-camera rotation ``R (3, 3)``: :func:`camera_rays`' arithmetic per ray (its matrix
+    products may round the last bit differently)."""
+    c0 = u * k[0, 0] + v * k[0, 1] + k[0, 2]
+    c1 = -(u * k[1, 0] + v * k[1, 1] + k[1, 2])  # vision (x right, y down, z forward) to our camera frame
+    c2 = -(u * k[2, 0] + v * k[2, 1] + k[2, 2])
+    d0 = c0 * R[0, 0] + c1 * R[1, 0] + c2 * R[2, 0]  # R^T d
+    d1 = c0 * R[0, 1] + c1 * R[1, 1] + c2 * R[2, 1]
+    d2 = c0 * R[0, 2] + c1 * R[1, 2] + c2 * R[2, 2]
+    n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    return d0 / n, d1 / n, d2 / n
+
+
+@numba.njit(nogil=True, cache=True)
+def _pixel_rays_loop(k: np.ndarray, R: np.ndarray, i0: int, out: np.ndarray) -> None:  # pragma: no cover
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[i, j, 0], out[i, j, 1], out[i, j, 2] = _pixel_ray(k, R, j + 0.5, i0 + i + 0.5)
+
+
+def pixel_rays(K: Array, world_to_camera: Array, height: int, width: int, rows: slice | None = None) -> torch.Tensor:
+    """``(h, width, 3)`` float64 unit world directions through the pixel centres of rows ``rows`` (None: all) of a
+    ``height x width`` pinhole camera: :func:`camera_rays` with one ray per pixel, as one compiled loop (a
+    12-megapixel image: 0.15 s against 5 s). Equal to it within the last bit (the matrix products round differently)."""
+    _check_size(height, width, 1)
+    Kt, _ = to_tensor(K, "K", torch.float64)
+    if Kt.shape != (3, 3):
+        raise ValueError(f"K must have shape (3, 3), got {tuple(Kt.shape)}")
+    check_finite(Kt, "K")
+    k_inv = np.ascontiguousarray(torch.linalg.inv(Kt).numpy())
+    r = np.ascontiguousarray(_rotation(world_to_camera).numpy())
+    i0, i1, _ = (rows or slice(None)).indices(height)
+    out = np.empty((max(0, i1 - i0), width, 3), dtype=np.float64)
+    _pixel_rays_loop(k_inv, r, i0, out)
+    return torch.from_numpy(out)
+
+
 def _bspline_view(env: torch.Tensor, K: Array, world_to_camera: Array, height: int, width: int) -> torch.Tensor:
     """:func:`view` of a float32 map by the cubic B-spline, one ray per pixel, as one compiled loop per strip of rows
     (:func:`_bspline_view_rows`) on torch's threads: the work of :func:`camera_rays` and
@@ -216,25 +255,12 @@ def _bspline_view_rows(env: np.ndarray, k_inv: np.ndarray, R: np.ndarray, north:
     float64; a ray at a pole takes the pole's ``north``/``south (3,)`` value."""
     he, we = env.shape[0], env.shape[1]
     w = out.shape[1]
-    k00, k01, k02, k10, k11, k12 = k_inv[0, 0], k_inv[0, 1], k_inv[0, 2], k_inv[1, 0], k_inv[1, 1], k_inv[1, 2]
-    k20, k21, k22 = k_inv[2, 0], k_inv[2, 1], k_inv[2, 2]
-    r00, r01, r02, r10, r11, r12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
-    r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
     wx = np.empty(4)
     wy = np.empty(4)
     for i in range(i0, i1):
         v = i + 0.5
         for j in range(w):
-            u = j + 0.5
-            # vision = (u, v, 1) K^-T; our camera frame flips y and z; world = cam R (R^T d for row vectors)
-            c0 = u * k00 + v * k01 + k02
-            c1 = -(u * k10 + v * k11 + k12)
-            c2 = -(u * k20 + v * k21 + k22)
-            d0 = c0 * r00 + c1 * r10 + c2 * r20
-            d1 = c0 * r01 + c1 * r11 + c2 * r21
-            d2 = c0 * r02 + c1 * r12 + c2 * r22
-            nrm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            d0, d1, d2 = d0 / nrm, d1 / nrm, d2 / nrm
+            d0, d1, d2 = _pixel_ray(k_inv, R, j + 0.5, v)
             if abs(d1) >= 1.0 - 1e-12:  # a pole: the pole rows' means (sample_bspline's _at_poles)
                 pole = north if d1 > 0 else south
                 out[i, j, 0], out[i, j, 1], out[i, j, 2] = pole[0], pole[1], pole[2]

@@ -54,7 +54,7 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
         from physrelight.sky_model import overcast_sky
 
         def strip(rows: slice) -> torch.Tensor:
-            d = horizon_clamped(panorama.camera_rays(K, R, height, width, 1, rows))[..., 0, :].double().numpy()
+            d = horizon_clamped(panorama.pixel_rays(K, R, height, width, rows)).numpy()
             return torch.from_numpy(overcast_sky(d) * overcast_level()).float()[..., None].expand(-1, -1, 3)
 
         return _by_strips(strip, height)
@@ -65,7 +65,7 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
     rgb = torch.from_numpy(sun_rgb(d))
 
     def clear(rows: slice) -> torch.Tensor:
-        rays = horizon_clamped(panorama.camera_rays(K, R, height, width, 1, rows))[..., 0, :]
+        rays = horizon_clamped(panorama.pixel_rays(K, R, height, width, rows))
         out = torch.from_numpy(sunsky_radiance(rays.double().numpy(), d)).float()
         return out + (sun_disc(rays, d)[..., None] * rgb).to(out.dtype)
 
@@ -97,8 +97,11 @@ def fitted_sky(coeffs: Any, K: Any, world_to_camera: Any, height: int, width: in
     from physrelight.sky_model import fit_sky, sky_view
 
     fit = fit_sky(coeffs, glow_exponent)
-    return _by_strips(lambda rows: sky_view(fit, panorama.camera_rays(K, world_to_camera, height, width, 1, rows))
-                      .float(), height)
+
+    def strip(rows: slice) -> torch.Tensor:
+        return sky_view(fit, panorama.pixel_rays(K, world_to_camera, height, width, rows)[..., None, :]).float()
+
+    return _by_strips(strip, height)
 
 
 SKY_RENDERINGS = ("target", "fit")

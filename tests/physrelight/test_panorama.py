@@ -138,3 +138,17 @@ def test_08_the_compiled_bspline_view_is_the_float64_lookup_to_float32_rounding(
     assert fast.dtype == torch.float32 and fast.shape == (h, w, 3)
     rel = ((fast.double() - exact).abs() / exact.abs()).max().item()
     assert rel < 2e-7  # float32's half ulp is 6e-8: the sum's rounding and the output's
+
+
+def test_09_pixel_rays_are_camera_rays_to_the_last_bit_and_take_strips_of_rows() -> None:
+    """One ray per pixel centre by a compiled loop: :func:`camera_rays` with ``samples=1`` within an ulp (their
+    matrix products round differently), unit length, and a strip of rows is those rows of the whole image."""
+    K, R, h, w = _cam(75.0, 130.0, 35.0, width=120)
+    fast = panorama.pixel_rays(K, R, h, w)
+    slow = panorama.camera_rays(K, R, h, w, 1)[..., 0, :]
+    assert fast.shape == (h, w, 3) and fast.dtype == torch.float64
+    assert (fast - slow).abs().max().item() <= 4.5e-16
+    torch.testing.assert_close(fast.norm(dim=-1), torch.ones(h, w, dtype=torch.float64), rtol=0, atol=1e-15)
+    assert torch.equal(panorama.pixel_rays(K, R, h, w, slice(20, 47)), fast[20:47])
+    with pytest.raises(ValueError, match="K must"):
+        panorama.pixel_rays(np.eye(2), R, h, w)

@@ -66,14 +66,15 @@ def test_02_a_low_suns_disc_is_red_as_its_light() -> None:
 @pytest.mark.parametrize("threads", [1, 2])
 def test_03_a_model_sky_by_strips_of_rows_is_the_sky_evaluated_in_one_piece(threads) -> None:
     """The clear sky, the overcast sky and the fitted sky are evaluated by strips of STRIP_ROWS rows on torch's
-    threads: every pixel as the whole image evaluated at once gives it, to the bit, at any thread count."""
+    threads (rays by :func:`physrelight.panorama.pixel_rays`): every pixel as the whole image evaluated at once gives
+    it, to the bit, at any thread count."""
     from physrelight import sky_view
     from physrelight.sky_model import fit_sky, horizon_clamped, sky_view as model_view, sun_disc, sunsky_radiance
     from physrelight.target_lighting import Sun, clear_sky_sun, sun_rgb, target_lighting
 
     h, w = 2 * sky_view.STRIP_ROWS + 9, 40
     K, R = panorama.view_intrinsics(70.0, w, h), panorama.level_camera(30.0, 20.0)
-    rays = horizon_clamped(panorama.camera_rays(K, R, h, w, 1))[..., 0, :]
+    rays = horizon_clamped(panorama.pixel_rays(K, R, h, w))
     sun = Sun(25.0, 40.0)
     d = clear_sky_sun(sun.direction)
     whole = torch.from_numpy(sunsky_radiance(rays.double().numpy(), d)).float()
@@ -82,7 +83,7 @@ def test_03_a_model_sky_by_strips_of_rows_is_the_sky_evaluated_in_one_piece(thre
 
     grey = torch.from_numpy(overcast_sky(rays.double().numpy()) * overcast_level()).float()[..., None].expand(-1, -1, 3)
     coeffs = target_lighting(sun, None, "clear")
-    fitted = model_view(fit_sky(coeffs), panorama.camera_rays(K, R, h, w, 1)).float()
+    fitted = model_view(fit_sky(coeffs), panorama.pixel_rays(K, R, h, w)[..., None, :]).float()
     before = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
