@@ -87,7 +87,19 @@ def test_04_the_paeth_filter_is_the_specifications():
             assert rows[i, k + 1] == (img[i, k] - pred) % 256
 
 
-def test_05_bad_input_is_named():
+def test_05_a_stream_longer_than_one_chunk_is_split_over_several_idat_chunks(monkeypatch):
+    from physrelight import png
+
+    monkeypatch.setattr(png, "IDAT_BYTES", 1000)
+    rng = np.random.default_rng(5)
+    u8 = rng.integers(0, 256, size=(200, 50, 3), dtype=np.uint8)  # noise: about 30 kB compressed
+    data = encode_png(u8)
+    idats = [b for k, b in _chunks(data) if k == b"IDAT"]
+    assert len(idats) > 10 and all(len(b) <= 1000 for b in idats)
+    np.testing.assert_array_equal(np.asarray(Image.open(__import__("io").BytesIO(data))), u8)
+
+
+def test_06_bad_input_is_named():
     with pytest.raises(ValueError, match="uint8"):
         encode_png(np.zeros((4, 4, 3), dtype=np.float32))
     with pytest.raises(ValueError, match="C in 1-4"):
