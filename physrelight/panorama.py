@@ -204,17 +204,23 @@ def _pixel_rays_loop(k: np.ndarray, R: np.ndarray, i0: int, out: np.ndarray) -> 
             out[i, j, 0], out[i, j, 1], out[i, j, 2] = _pixel_ray(k, R, j + 0.5, i0 + i + 0.5)
 
 
+def _loop_camera(K: Array, world_to_camera: Array) -> tuple[np.ndarray, np.ndarray]:
+    """The checked camera as the compiled loops take it: the inverse intrinsics and the world-to-camera rotation,
+    ``(3, 3)`` float64 each, contiguous."""
+    Kt, _ = to_tensor(K, "K", torch.float64)
+    if Kt.shape != (3, 3):
+        raise ValueError(f"K must have shape (3, 3), got {tuple(Kt.shape)}")
+    check_finite(Kt, "K")
+    return (np.ascontiguousarray(torch.linalg.inv(Kt).numpy()),
+            np.ascontiguousarray(_rotation(world_to_camera).numpy()))
+
+
 def pixel_rays(K: Array, world_to_camera: Array, height: int, width: int, rows: slice | None = None) -> torch.Tensor:
     """``(h, width, 3)`` float64 unit world directions through the pixel centres of rows ``rows`` (None: all) of a
     ``height x width`` pinhole camera: :func:`camera_rays` with one ray per pixel, as one compiled loop (a
     12-megapixel image: 0.15 s against 5 s). Equal to it within the last bit (the matrix products round differently)."""
     _check_size(height, width, 1)
-    Kt, _ = to_tensor(K, "K", torch.float64)
-    if Kt.shape != (3, 3):
-        raise ValueError(f"K must have shape (3, 3), got {tuple(Kt.shape)}")
-    check_finite(Kt, "K")
-    k_inv = np.ascontiguousarray(torch.linalg.inv(Kt).numpy())
-    r = np.ascontiguousarray(_rotation(world_to_camera).numpy())
+    k_inv, r = _loop_camera(K, world_to_camera)
     i0, i1, _ = (rows or slice(None)).indices(height)
     out = np.empty((max(0, i1 - i0), width, 3), dtype=np.float64)
     _pixel_rays_loop(k_inv, r, i0, out)
@@ -226,14 +232,10 @@ def _bspline_view(env: torch.Tensor, K: Array, world_to_camera: Array, height: i
     (:func:`_bspline_view_rows`) on torch's threads: the work of :func:`camera_rays` and
     :func:`physrelight.envmap.sample_bspline` without their full-size intermediates (a 12-megapixel sky: 1.2 s against
     2.3 s, one thread, 2-core AMD EPYC). The texel coordinates and weights are float64 where the torch path rounds the
-    rays to float32 first; near a pole, where ``acos`` magnifies a direction's last bit, that path's lookup moves
-    by up to 0.1 % and this one stays with the float64 evaluation (``tests/physrelight/test_panorama.py``)."""
-    Kt, _ = to_tensor(K, "K", torch.float64)
-    if Kt.shape != (3, 3):
-        raise ValueError(f"K must have shape (3, 3), got {tuple(Kt.shape)}")
-    check_finite(Kt, "K")
-    k_inv = np.ascontiguousarray(torch.linalg.inv(Kt).numpy())
-    r = np.ascontiguousarray(_rotation(world_to_camera).numpy())
+    rays to float32 first; beside a pole, where ``acos`` magnifies a direction's last bit, that path's lookup was
+    up to 0.3 relative off and this one stays with the float64 evaluation (``tests/physrelight/test_panorama.py``
+    08)."""
+    k_inv, r = _loop_camera(K, world_to_camera)
     e = env.contiguous().numpy()
     means = env.double().mean(dim=1)  # the pole rows' means, as sample_bspline takes them
     north = ((5 * means[0] + means[1]) / 6).numpy()
