@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 
 from physrelight.window_sums import box_mean
 
-__all__ = ["box_filter", "cumsum", "guided_filter", "guided_upsample"]
+__all__ = ["box_filter", "guided_filter", "guided_upsample"]
 
 
 def _check(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> None:
@@ -38,29 +37,15 @@ def _check(guide: torch.Tensor, src: torch.Tensor, radius: int, eps: float) -> N
         raise ValueError(f"eps must be a positive number, got {eps!r}")
 
 
-def cumsum(x: torch.Tensor, dim: int) -> torch.Tensor:
-    """``torch.cumsum(x, dim)``, the same numbers. Along a dimension other than the last, torch's CPU kernel strides
-    through memory (four times slower than along rows on a 12-megapixel image), so numpy's running sum, which adds
-    whole contiguous slices, is used instead, in float64 as torch accumulates float32 and float64. One call that
-    releases the GIL: on threads (:mod:`physrelight.parallel`) the pieces run side by side, where a Python loop
-    adding one row at a time (as this did) held the GIL between rows and two threads took twice one's time."""
-    dim = dim % x.ndim
-    if dim == x.ndim - 1 or x.dtype not in (torch.float32, torch.float64) or x.shape[dim] < 2 or x.device.type != "cpu":
-        return torch.cumsum(x, dim=dim)
-    a = x.detach().numpy().astype(np.float64)  # a copy (numpy's cast: faster here than torch's)
-    np.cumsum(a, axis=dim, out=a)  # in place, whole slices at a time (widening while adding is slower: buffered)
-    return torch.from_numpy(a).to(x.dtype)
-
-
-def _window_sums(x: torch.Tensor, radius: int, dim: int, out: torch.Tensor | None = None) -> torch.Tensor:
-    """Sums of ``x`` over ``[i - r, i + r]`` along ``dim``, the window cut at the ends (cumulative sums: O(1) per pixel),
-    into ``out`` (``x``'s shape and dtype; None: a new tensor)."""
+def _window_sums(x: torch.Tensor, radius: int, dim: int) -> torch.Tensor:
+    """Sums of ``x`` over ``[i - r, i + r]`` along ``dim``, the window cut at the ends (cumulative sums: O(1) per pixel).
+    The summed-area path off the CPU (and the arithmetic :mod:`physrelight.window_sums` compiles for it)."""
     n = x.shape[dim]
-    c = cumsum(x, dim)  # c[k] = x[0] + ... + x[k]
+    c = torch.cumsum(x, dim=dim)  # c[k] = x[0] + ... + x[k], accumulated in float64 for float32 and float64
     r = min(radius, n)
     # sum = c[min(i + r, n - 1)] - c[i - r - 1] (0 for i <= r), written in place into one output by slicing: no
     # padded copy of c and no concatenation (twice as fast on a 12-megapixel image as building both ends by cat)
-    out = torch.empty_like(c) if out is None else out
+    out = torch.empty_like(c)
     if n - r > 0:
         out.narrow(dim, 0, n - r).copy_(c.narrow(dim, r, n - r))
     tail = out.narrow(dim, n - r, r)
@@ -108,7 +93,7 @@ def box_filter(x: torch.Tensor, radius: int) -> torch.Tensor:
         rows = F.avg_pool2d(x, (1, k), stride=1, padding=(0, radius), count_include_pad=False)
         return F.avg_pool2d(rows, (k, 1), stride=1, padding=(radius, 0), count_include_pad=False)
     h, w = x.shape[-2:]
-    if x.dtype not in (torch.float32, torch.float64):  # cumsum's own precision: count as the sums are made
+    if x.dtype not in (torch.float32, torch.float64):  # the running sums' own precision: count as they are made
         count = _window_sums(_window_sums(torch.ones(1, 1, h, w, dtype=x.dtype, device=x.device), radius, -2),
                              radius, -1)
         return _window_sums(_window_sums(x, radius, -2), radius, -1) / count

@@ -385,7 +385,7 @@ def _local_gaussian_nll_at(x: torch.Tensor, w: torch.Tensor, r: int, index: torc
 
     def window_sums(plane: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The sums of ``plane (H, W)`` over the windows of ``index``, and over the whole image."""
-        sat = summed_area_table(plane)  # F.pad(cumsum(plane, 0).cumsum(1), (1, 0, 1, 0)), compiled
+        sat = summed_area_table(plane)  # F.pad(plane.cumsum(0).cumsum(1), (1, 0, 1, 0)), compiled
         return sat[y1, x1] - sat[y0, x1] - sat[y1, x0] + sat[y0, x0], sat[-1, -1]
 
     def plane(k: int) -> torch.Tensor:

@@ -134,7 +134,7 @@ def box_mean(x: torch.Tensor, radius: int, count: torch.Tensor) -> torch.Tensor:
 
 def summed_area_table(x: torch.Tensor) -> torch.Tensor:
     """``(H + 1, W + 1)`` float64 summed-area table of ``x (H, W)`` float64 (CPU): a zero first row and column, then
-    the running sums down each column and along each row, as ``F.pad(cumsum(x, 0).cumsum(1), (1, 0, 1, 0))`` makes
+    the running sums down each column and along each row, as ``F.pad(x.cumsum(0).cumsum(1), (1, 0, 1, 0))`` makes
     them, to the bit, in one pass."""
     if x.ndim != 2 or x.dtype != torch.float64 or x.device.type != "cpu":
         raise ValueError(f"summed_area_table takes an (H, W) float64 CPU tensor, got {tuple(x.shape)} {x.dtype}")

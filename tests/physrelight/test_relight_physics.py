@@ -86,17 +86,6 @@ def test_04b_the_summed_area_box_filter_is_the_direct_mean(shape, radius) -> Non
                               atol=1e-12, rtol=0)
 
 
-@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_04c_the_box_filters_cumulative_sums_are_torchs_to_the_bit(dtype) -> None:
-    """The summed-area path's running sums along columns are added a row at a time (torch's kernel is slow there);
-    they equal ``torch.cumsum`` exactly, along every dimension of several shapes (float64 accumulation, as torch's)."""
-    g = torch.Generator().manual_seed(5)
-    for shape in [(1, 3, 97, 61), (2, 1, 5, 3), (1, 1, 1, 9), (4, 7)]:
-        x = torch.randn(*shape, generator=g, dtype=dtype) * 100
-        for d in range(-len(shape), len(shape)):
-            assert torch.equal(guided_filter.cumsum(x, d), torch.cumsum(x, d))
-
-
 @pytest.mark.parametrize("h, w, radius, dtype", [(37, 53, 17, torch.float32), (5, 90, 200, torch.float64),
                                                   (64, 3, 26, torch.float32), (1300, 15000, 600, torch.float32)])
 def test_04d_the_box_filters_window_counts_are_those_of_a_plane_of_ones_to_the_bit(h, w, radius, dtype) -> None:
