@@ -29,8 +29,9 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 __all__ = ["MEMORY_FRACTION", "SETUP_COMMAND", "MissingExtra", "MissingSetup", "available_memory",
-           "check_fits_in_memory", "check_not_input", "keep_freed_memory", "check_output_file", "check_output_folder", "check_outputs", "finite_number", "missing_requirements",
-           "number_in", "positive_int", "positive_number", "require_extras"]
+           "check_fits_in_memory", "check_not_input", "check_output_file", "check_output_folder", "check_outputs",
+           "finite_number", "keep_freed_memory", "missing_requirements", "number_in", "positive_int",
+           "positive_number", "require_extras"]
 
 MEMORY_FRACTION = 0.5
 """The share of the available memory one run may plan to hold (:func:`check_fits_in_memory`): the rest is the

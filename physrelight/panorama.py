@@ -33,7 +33,7 @@ import torch
 from physrelight import envmap
 from physrelight._checks import Array, check_finite, check_rotation, to_tensor
 from physrelight.camera import intrinsics_from_fov, look_at
-from physrelight.parallel import thread_map
+from physrelight.parallel import even_strips, thread_map
 
 __all__ = ["INTERPOLATIONS", "MAX_FOV_DEG", "camera_rays", "level_camera", "look_up", "native_width", "pixel_rays",
            "texel_magnification", "view", "view_intrinsics", "view_mask"]
@@ -242,9 +242,8 @@ def _bspline_view(env: torch.Tensor, K: Array, world_to_camera: Array, height: i
     south = ((5 * means[-1] + means[-2]) / 6).numpy()
     out = np.empty((height, width, 3), dtype=np.float32)
     n = max(1, torch.get_num_threads())
-    edges = [round(i * height / (4 * n)) for i in range(4 * n + 1)] if n > 1 else [0, height]
     thread_map(lambda s: _bspline_view_rows(e, k_inv, r, north, south, out, s[0], s[1]),
-               [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a])
+               even_strips(height, 4 * n if n > 1 else 1))
     return torch.from_numpy(out)
 
 

@@ -16,7 +16,7 @@ from typing import TypeVar
 
 import torch
 
-__all__ = ["single_threaded", "thread_map"]
+__all__ = ["even_strips", "fixed_strips", "single_threaded", "thread_map"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -45,6 +45,19 @@ def thread_map(fn: Callable[[T], R], items: Iterable[T], threads: int | None = N
             return list(pool.map(run, items))
     finally:
         torch.set_num_threads(caller)  # a worker's setting must not become the process's
+
+
+def even_strips(n: int, k: int) -> list[tuple[int, int]]:
+    """``k`` contiguous ``(start, stop)`` ranges of near-equal length covering ``range(n)`` (fewer when ``n < k``):
+    pieces for :func:`thread_map` whose number follows the threads."""
+    edges = [round(i * n / k) for i in range(k + 1)]
+    return [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def fixed_strips(n: int, size: int) -> list[tuple[int, int]]:
+    """``(start, stop)`` ranges of ``size`` covering ``range(n)``, the last one shorter: pieces that do not depend on
+    the thread count, for work whose result would (a deflate stream's bytes)."""
+    return [(a, min(n, a + size)) for a in range(0, n, size)]
 
 
 @contextmanager

@@ -18,7 +18,7 @@ import zlib
 import numba
 import numpy as np
 
-from physrelight.parallel import thread_map
+from physrelight.parallel import fixed_strips, thread_map
 
 __all__ = ["IDAT_BYTES", "STRIP_ROWS", "encode_png"]
 
@@ -70,7 +70,7 @@ def encode_png(u8: np.ndarray, level: int = 1) -> bytes:
     h, w, c = img.shape
     rows = np.ascontiguousarray(img).reshape(h, w * c)
     filtered = np.empty((h, w * c + 1), dtype=np.uint8)
-    strips = [(a, min(h, a + STRIP_ROWS)) for a in range(0, h, STRIP_ROWS)]
+    strips = fixed_strips(h, STRIP_ROWS)  # not the threads': the bytes are the same at any thread count
     thread_map(lambda s: _paeth_rows(rows, c, filtered, s[0], s[1]), strips)
 
     def deflate(s: tuple[int, int]) -> bytes:

@@ -66,7 +66,7 @@ def target_sky(target: Any, K: Any, world_to_camera: Any, height: int, width: in
 
     def clear(rows: slice) -> torch.Tensor:
         rays = horizon_clamped(panorama.pixel_rays(K, R, height, width, rows))
-        out = torch.from_numpy(sunsky_radiance(rays.double().numpy(), d)).float()
+        out = torch.from_numpy(sunsky_radiance(rays.numpy(), d)).float()  # rays: float64
         return out + (sun_disc(rays, d)[..., None] * rgb).to(out.dtype)
 
     return _by_strips(clear, height)
@@ -81,9 +81,9 @@ def _by_strips(fn: Any, height: int) -> torch.Tensor:
     (:func:`physrelight.parallel.thread_map`; numpy and torch release the GIL), stacked: ``(height, W, 3)``. Every pixel
     is evaluated alone, so the image is the one ``fn(slice(None))`` gives, at any thread count (12 MP: the clear sky
     took 3.4 s on one thread in one piece)."""
-    from physrelight.parallel import thread_map
+    from physrelight.parallel import fixed_strips, thread_map
 
-    parts = thread_map(fn, [slice(a, min(height, a + STRIP_ROWS)) for a in range(0, height, STRIP_ROWS)])
+    parts = thread_map(fn, [slice(a, b) for a, b in fixed_strips(height, STRIP_ROWS)])
     return torch.cat(parts, dim=0).contiguous()
 
 

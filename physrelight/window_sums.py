@@ -21,7 +21,7 @@ import numba
 import numpy as np
 import torch
 
-from physrelight.parallel import thread_map
+from physrelight.parallel import even_strips, thread_map
 
 __all__ = ["box_mean", "summed_area_table"]
 
@@ -93,12 +93,6 @@ def _summed_area_table(x: np.ndarray, out: np.ndarray) -> None:  # pragma: no co
             out[i + 1, j + 1] = acc
 
 
-def _strips(n: int, k: int) -> list[tuple[int, int]]:
-    """``k`` contiguous ``(start, stop)`` ranges of near-equal length covering ``range(n)``."""
-    edges = [round(i * n / k) for i in range(k + 1)]
-    return [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
-
-
 def box_mean(x: torch.Tensor, radius: int, count: torch.Tensor) -> torch.Tensor:
     """Mean of ``x (B, C, H, W)`` (CPU, float32 or float64) over each pixel's ``(2r+1)^2`` window cut at the border,
     from running sums: the numbers of :func:`physrelight.guided_filter.box_filter`'s summed-area path to the bit.
@@ -125,10 +119,10 @@ def box_mean(x: torch.Tensor, radius: int, count: torch.Tensor) -> torch.Tensor:
     # about four pieces per thread, so that uneven planes and a descheduled thread even out (pieces are taken in turn)
     per = 1 if k <= 1 else -(-4 * k // n)
     thread_map(lambda it: _column_window_sums(planes[it[0]], radius, cols[it[0]], *it[1]),
-               [(p, s) for p in range(n) for s in _strips(w, per)])
+               [(p, s) for p in range(n) for s in even_strips(w, per)])
     cnt = count.reshape(h, w).contiguous().numpy()
     thread_map(lambda it: _row_window_means(cols[it[0]], radius, cnt, out[it[0]], *it[1]),
-               [(p, s) for p in range(n) for s in _strips(h, per)])
+               [(p, s) for p in range(n) for s in even_strips(h, per)])
     return torch.from_numpy(out).reshape(b, c, h, w)
 
 

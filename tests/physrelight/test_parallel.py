@@ -79,3 +79,16 @@ def test_05_single_threaded_runs_torch_on_one_thread_and_restores_the_callers_se
         with single_threaded():
             raise RuntimeError("inside")
     assert torch.get_num_threads() == 2
+
+
+def test_06_strips_cover_the_range_in_order_without_gaps_or_overlaps() -> None:
+    """even_strips: ``k`` pieces of near-equal length (fewer when there are fewer items); fixed_strips: pieces of one
+    size, the last one shorter, whatever the thread count."""
+    from physrelight.parallel import even_strips, fixed_strips
+
+    for n, k in [(10, 3), (2669, 8), (3, 8), (1, 1)]:
+        s = even_strips(n, k)
+        assert s[0][0] == 0 and s[-1][1] == n and all(a[1] == b[0] for a, b in zip(s, s[1:]))
+        assert len(s) == min(n, k) and max(b - a for a, b in s) - min(b - a for a, b in s) <= 1
+    assert fixed_strips(300, 128) == [(0, 128), (128, 256), (256, 300)]
+    assert fixed_strips(128, 128) == [(0, 128)] and fixed_strips(0, 64) == []
