@@ -48,15 +48,17 @@ import torch
 
 from physrelight import sh
 from physrelight._checks import Array
+from physrelight.camera import project
 from physrelight.colour import LUMINANCE, srgb_to_linear
 from physrelight.envmap import direction_from_angles
 from physrelight.panorama import camera_rays, level_camera, view_intrinsics
 from physrelight.sky_model import overcast_sky, sun_colour
 
 __all__ = ["AZIMUTH_STEP_DEG", "CLIP_LEVEL", "DARK_SKY_LEVEL", "EFFECTIVE_SAMPLES_PER_SR", "ELEVATIONS_DEG", "LOG_SIGMA",
-           "MAX_BLOCKS_PER_SIDE", "MAX_CLIPPED_SKY", "MAX_EXPONENT", "MIN_EXPONENT", "MIN_SKY_PIXELS", "MIXES",
-           "PREVIEW_SIZE", "SKY_KINDS", "SkyBlocks", "SUNSKY_TURBIDITY_TABLE", "SunPosterior", "estimate_sun_from_sky",
-           "hosek_wilkie_sky", "lighting_preview", "sky_blocks"]
+           "MAX_BLOCKS_PER_SIDE", "MAX_CLIPPED_SKY", "MAX_EXPONENT", "MAX_UNSEEN_SHARE", "MIN_EXPONENT",
+           "MIN_SKY_PIXELS", "MIXES", "PREVIEW_SIZE", "SEEN_QUANTILE", "SEEN_RADIUS_DEG", "SKY_KINDS", "SkyBlocks",
+           "SUNSKY_TURBIDITY_TABLE", "SunPosterior", "estimate_sun_from_sky", "hosek_wilkie_sky", "lighting_preview",
+           "sky_blocks", "unseen_in_frame"]
 
 SUNSKY_TURBIDITY_TABLE = Path(__file__).resolve().parent / "data" / "sunsky_turbidity_table.safetensors"
 """Mitsuba 3's Hosek-Wilkie sky at turbidities 2-6 (``(5, 23, 31, 61, 3)`` float16, 1.3 MB), per turbidity in the
@@ -85,11 +87,26 @@ DARK_SKY_LEVEL = 0.03
 """A display photo whose sky's median luminance (display value) is below this reads no sun (night)."""
 MAX_BLOCKS_PER_SIDE = 16
 """The sky is read in blocks of pixels, at most this many along the image's longer side."""
-SKY_KINDS = ("clear", "hazy", "overcast", "night", "blown out", "none")
+SEEN_RADIUS_DEG = 4.0
+"""A sun in the frame is looked for within this angle of where a hypothesis puts it (the grid's cells are 4 x 5
+degrees: the true sun lies within about 3.2 degrees of its cell's centre)."""
+SEEN_QUANTILE = 0.999
+"""A sun in the frame on open sky is the brightest thing in the sky, and in a display photo its disc is clipped: the
+pixels within :data:`SEEN_RADIUS_DEG` of it reach at least this quantile of the sky's luminance (clipped pixels
+count as brighter than any). Where none does, the sun is not there. A high quantile, not the maximum: a few stray
+pixels (a lamp's flare or a star inside the sky mask) do not set the bar."""
+MAX_UNSEEN_SHARE = 0.5
+"""A sky whose fit puts more than this share of the sun's posterior in the frame where no sun is seen reads no sun
+(kind ``"unseen"``): the model explains the sky only with a sun the photo does not show (a twilight glow after
+sunset, a lit night sky, a haze the model does not hold)."""
+SKY_KINDS = ("clear", "hazy", "overcast", "night", "blown out", "unseen", "none")
 """What :attr:`SunPosterior.sky_kind` says of a sky: a sun with the MAP overcast mix 0 or above 0; no sun because
-the sunless sky explains it best, it is too dark, too clipped, or there is too little of it."""
+the sunless sky explains it best, it is too dark, too clipped, its fit puts the sun in the frame where none is seen,
+or there is too little of it."""
 PREVIEW_SIZE = (128, 256)
 """``(H, W)`` of :func:`lighting_preview`'s lat-long image."""
+_PART_CLIPPED = 1e300  # the seen check's brightness of a pixel clipped in some channels, not all (all: inf)
+_SEEN_POOL = 256  # the seen check reads the image max-pooled to at most this many blocks along its longer side
 _REFINE_HALF_DEG, _REFINE_STEP_DEG = 6.0, 1.0
 _FLOOR = 1e-3  # linear values are floored here (relative to the sky's median) before the log
 _IRLS_STEPS = 2
@@ -233,6 +250,59 @@ def sky_blocks(linear: np.ndarray, clipped: np.ndarray, sky: np.ndarray, rays: n
                      solid_angle=float(pixel_sr[sky].sum()))
 
 
+def unseen_in_frame(directions: np.ndarray, brightness: np.ndarray, sky: np.ndarray, K: np.ndarray,
+                    world_to_camera: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: which world directions ``(N, 3)`` a sun cannot take because the photo would show it there.
+
+    A direction is ruled out when it projects inside the frame, at least a quarter of the pixels within
+    :data:`SEEN_RADIUS_DEG` of it are sky (open sky: a sun behind a building or a tree is not ruled out), and none
+    of the sky pixels there is as bright as the sky's :data:`SEEN_QUANTILE` quantile. A pixel clipped in every channel
+    counts as seen, sky or not (a sun's disc the sky mask left out); a lit wall does not.
+
+    Args:
+        directions: ``(N, 3)`` unit world directions.
+        brightness: ``(H, W)`` the photo's luminance; ``inf`` where every channel is clipped, above any luminance
+            (1e300) where some are: a sun in view is clipped in every channel where the sky is in some.
+        sky: ``(H, W)`` bool, the sky pixels read.
+        K: ``(3, 3)`` intrinsics; world_to_camera: ``(3, 3)`` rotation.
+
+    The image is max-pooled to at most :data:`_SEEN_POOL` blocks along its longer side first (a block is sky when
+    half of it is).
+    """
+    h, w = sky.shape
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros(len(d), dtype=bool)
+    if not sky.any() or len(d) == 0:
+        return out
+    uv, depth = project(torch.from_numpy((world_to_camera @ d.T)[None]), torch.from_numpy(K))
+    u, v, z = uv[0, 0].numpy(), uv[0, 1].numpy(), depth[0, 0].numpy()
+    inside = np.flatnonzero((z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h))
+    if len(inside) == 0:
+        return out
+    # clipped (inf) pixels as the largest float, so the quantile's interpolation stays finite
+    threshold = float(np.quantile(np.minimum(brightness[sky], np.finfo(np.float64).max), SEEN_QUANTILE))
+    b = max(1, math.ceil(max(h, w) / _SEEN_POOL))
+    hp, wp = math.ceil(h / b), math.ceil(w / b)
+    lum = np.full((hp * b, wp * b), -np.inf)
+    # the sky's pixels, and any clipped one (a sun's disc the sky mask left out); not a lit wall's
+    lum[:h, :w] = np.where(sky | np.isposinf(brightness), brightness, -np.inf)
+    share = np.zeros((hp * b, wp * b))
+    share[:h, :w] = sky
+    pooled = lum.reshape(hp, b, wp, b).max((1, 3)).ravel()
+    is_sky = (share.reshape(hp, b, wp, b).mean((1, 3)) >= 0.5).ravel()
+    Kp = np.array(K, dtype=np.float64)
+    Kp[:2] /= b  # block centres: the pixel-centre convention scales with the block
+    rays = camera_rays(Kp, world_to_camera, hp, wp).numpy()[:, :, 0].reshape(-1, 3)
+    cos_r = math.cos(math.radians(SEEN_RADIUS_DEG))
+    for start in range(0, len(inside), 64):
+        idx = inside[start:start + 64]
+        near = (rays @ d[idx].T) > cos_r  # (P, n)
+        n_sky = (near & is_sky[:, None]).sum(0)
+        brightest = np.minimum(np.where(near, pooled[:, None], -np.inf).max(0), np.finfo(np.float64).max)
+        out[idx] = (n_sky > 0) & (n_sky >= 0.25 * near.sum(0)) & (brightest < threshold)
+    return out
+
+
 @dataclass(frozen=True)
 class SunPosterior:
     """Where the sun is, read from the sky (:func:`estimate_sun_from_sky`).
@@ -260,7 +330,8 @@ class SunPosterior:
         exponent: the MAP's gamma-like exponent ``g``.
         camera_yaw_deg: the camera's heading (world azimuth of its forward direction).
         sky_kind: what the sky is (:data:`SKY_KINDS`): ``"clear"`` (a sun, MAP mix 0), ``"hazy"`` (a sun, MAP mix
-            above 0), ``"overcast"``, ``"night"``, ``"blown out"``, ``"none"`` (too little sky to read).
+            above 0), ``"overcast"``, ``"night"``, ``"blown out"``, ``"unseen"`` (the fit's sun in the frame, where
+            the photo shows none: :data:`MAX_UNSEEN_SHARE`), ``"none"`` (too little sky to read).
         cues: the cues that spoke (:func:`physrelight.sun_estimate.estimate_sun`: ``"sky"``, ``"shadows"``,
             ``"shading"``); empty from :func:`estimate_sun_from_sky` alone.
 
@@ -522,8 +593,10 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     Returns:
         :class:`SunPosterior`. ``has_sun`` is False, with a reason, when fewer than :data:`MIN_SKY_PIXELS` sky
         pixels lie above the horizon, when a display photo's sky is darker than :data:`DARK_SKY_LEVEL` (night),
-        when more than :data:`MAX_CLIPPED_SKY` of it is clipped in every channel, or when the sunless sky
-        explains the pixels best; then the posterior is flat or nearly so.
+        when more than :data:`MAX_CLIPPED_SKY` of it is clipped in every channel, when the sunless sky
+        explains the pixels best (then the posterior is flat or nearly so), or when more than
+        :data:`MAX_UNSEEN_SHARE` of the sun's posterior lies in the frame where the photo shows no sun
+        (:func:`unseen_in_frame`; kind ``"unseen"``). Below that share those cells are ruled out.
 
     Raises:
         ValueError: shapes, non-finite or negative values, a mask that is not boolean, a bad camera.
@@ -599,11 +672,35 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     post = post / total
     p_sun = float(sun_mass.sum()) / total
 
-    i_t, i_m, i_e, i_a = np.unravel_index(int(np.argmax(joint)), joint.shape)
     if p_sun < 0.5:
         out = _no_sun(f"the sunless (overcast) sky explains the sky best (sun probability {p_sun:.2f})", yaw,
                       "overcast", p_sun, post)
         return out
+    # a sun in the frame on open sky would be seen there: the cells where it is not are ruled out
+    # clipped pixels rank above every unclipped one, and those clipped in every channel above those clipped in some
+    bright = np.where(clipped.all(-1), np.inf, np.where(clipped.any(-1), _PART_CLIPPED, lin @ np.array(LUMINANCE)))
+    unseen = unseen_in_frame(direction_from_angles(el[:, None], az[None, :]).reshape(-1, 3), bright, sky, Kc,
+                             R).reshape(len(el), len(az))
+    if unseen.any():
+        unseen_share = float(sun_mass[..., unseen].sum() / sun_mass.sum())
+        if unseen_share > MAX_UNSEEN_SHARE:
+            ie, ia = np.unravel_index(int(np.argmax(np.where(unseen, sun_mass.sum((0, 1)), -1.0))), unseen.shape)
+            ahead = (float(az[ia]) - yaw + 180.0) % 360.0 - 180.0
+            return _no_sun(f"the sky's fit puts the sun in the frame ({el[ie]:.0f} deg up, {ahead:.0f} deg from "
+                           f"straight ahead; {unseen_share:.0%} of its posterior) where the photo shows none: a glow "
+                           "after sunset, a lit night sky or a haze the sky model does not hold", yaw, "unseen",
+                           p_sun * (1.0 - unseen_share))  # the fit is not trusted: the flat prior
+        joint = np.where(unseen[None, None], -np.inf, joint)
+        sun_mass = np.where(unseen[None, None], 0.0, sun_mass)
+        post = sun_mass.sum((0, 1)) + ovc_mass * np.exp(prior)
+        total = float(post.sum())
+        post = post / total
+        p_sun = float(sun_mass.sum()) / total
+        if p_sun < 0.5:
+            return _no_sun(f"the sunless (overcast) sky explains the sky best once the suns the photo would show "
+                           f"are ruled out (sun probability {p_sun:.2f})", yaw, "overcast", p_sun, post)
+
+    i_t, i_m, i_e, i_a = np.unravel_index(int(np.argmax(joint)), joint.shape)
     # refine the MAP on a 1-degree grid round it, turbidity and mix searched again
     fe = np.clip(el[i_e] + np.arange(-_REFINE_HALF_DEG, _REFINE_HALF_DEG + 1e-9, _REFINE_STEP_DEG), 2.0, 90.0)
     fa = az[i_a] + np.arange(-_REFINE_HALF_DEG, _REFINE_HALF_DEG + 1e-9, _REFINE_STEP_DEG)
@@ -611,6 +708,10 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     with torch.no_grad():
         fll, fit_a, fg, _ = _fit(blocks, _table_at_elevations(fe), fe, fa)
     fjoint = fll.double().numpy() + np.log(np.cos(np.radians(fe)))[None, None, :, None]
+    if unseen.any():  # the MAP cell's centre is among the fine hypotheses and is not ruled out
+        fine_unseen = unseen_in_frame(direction_from_angles(fe[:, None], fa[None, :]).reshape(-1, 3), bright, sky,
+                                      Kc, R).reshape(len(fe), len(fa))
+        fjoint = np.where(fine_unseen[None, None], -np.inf, fjoint)
     j_t, j_m, j_e, j_a = np.unravel_index(int(np.argmax(fjoint)), fjoint.shape)
     e_map, a_map = float(fe[j_e]), float(fa[j_a]) % 360.0
     mixes = [m for m in MIXES if m < 1.0]

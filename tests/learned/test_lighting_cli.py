@@ -244,3 +244,15 @@ def test_08_the_field_of_view_comes_from_exif_unless_given(tmp_path: Path, capsy
     assert rec["camera"]["fov_source"] == "exif" and rec["camera"]["fov_deg"] == pytest.approx(fov, abs=1e-4)
     rec = _run([str(jpg), "--fov", "35", "--mask", str(mask), "-o", str(tmp_path / "b.json")], capsys)
     assert rec["camera"]["fov_source"] == "given" and rec["camera"]["fov_deg"] == 35.0
+
+
+def test_09_the_dusk_example_photo_reads_no_sun(tmp_path: Path, capsys) -> None:
+    """``rocket.jpg`` (the shipped example: a launch pad at dusk, the sun below the horizon) read as a user reads it
+    (the segmenter's sky, the horizon's pitch, the default field of view): its blue-hour glow fits a sun 17 deg up
+    in the frame, on open sky where no pixel is bright, so it is a stated fallback ("unseen"), not the confident
+    wrong sun it was (docs/sun-from-sky.md)."""
+    from physrelight.data import example_photo
+
+    rec = _run([str(example_photo()), "-o", str(tmp_path / "rocket.json")], capsys)
+    assert rec["source"] == "fallback" and rec["sun"] is None and rec["sky_kind"] == "unseen", rec["reason"]
+    assert "shows none" in rec["reason"]

@@ -272,3 +272,74 @@ def test_14_the_turbidity_table_keeps_the_turbidity_3_table() -> None:
     d = envmap.directions(32, 64)
     s = envmap.direction_from_angles(23.0, 70.0)
     assert np.allclose(sfs.hosek_wilkie_sky(d, s, 3.0), sunsky_radiance(d, s), rtol=2e-3, atol=1e-6)
+
+
+def _in_view_cases() -> list[tuple[float, float, float, float]]:
+    """Three seeded skies ``(elevation 8-25, azimuth, turbidity 2-6, camera yaw)`` with the sun inside the frame at
+    pitch 12 (the frame's top edge is 34 deg up, its sides 30 deg off the heading)."""
+    rng = np.random.default_rng(7)
+    out = []
+    for _ in range(3):
+        e, a, t = rng.uniform(8, 25), rng.uniform(0, 360), rng.uniform(2, 6)
+        out.append((e, a, t, a - rng.uniform(-15, 15)))
+    return out
+
+
+def test_15_a_sun_in_the_frame_that_the_photo_does_not_show_is_not_read() -> None:
+    """A sky shaped as a sun's, with the sun and its aureole not there (the pixels within 10 deg of it painted the
+    sky's median: what a twilight glow or a lit night sky looks like to the model), through a display camera: the
+    fit puts the sun in the frame, on open sky, where no pixel is bright, so no sun is read (kind ``"unseen"``, the
+    flat prior), never a confident sun. The same skies untouched: the sun within 5 deg (no false alarm)."""
+    for e, a, t, yaw in _in_view_cases():
+        img, mask, K, R, s = _mitsuba_sky(e, a, t, yaw, 12.0)
+        disp = _display(img, mask, np.ones(3))
+        near = np.degrees(np.arccos(np.clip(_camera(yaw, 12.0)[2] @ s, -1.0, 1.0))) < 10.0
+        assert near.any()  # the sun is in view
+        p = sfs.estimate_sun_from_sky(disp, mask, K, R)
+        assert p.has_sun and _angle(p.sun_direction, s) < 5.0, (e, a, t, p.reason)
+        hole = np.where(near[..., None], np.median(disp[mask], 0), disp)
+        p = sfs.estimate_sun_from_sky(hole, mask, K, R)
+        assert not p.has_sun and p.sky_kind == "unseen" and p.sun_direction is None, (e, a, t, p.sky_kind)
+        assert "shows none" in p.reason
+        assert p.credible_area_sr > 5.0  # the flat prior's 5.46 sr: nothing is claimed
+
+
+def test_16_a_sun_in_the_frame_behind_a_building_is_still_read() -> None:
+    """The skies of test 15 with a dark building (not sky in the mask) standing over the sun and 8 deg round it: the
+    sun is hidden, not missing, so the rule of test 15 does not apply and the sky's gradient still places it
+    within 5 deg."""
+    yy = np.arange(H)[:, None]
+    for e, a, t, yaw in _in_view_cases():
+        img, mask, K, R, s = _mitsuba_sky(e, a, t, yaw, 12.0)
+        disp = _display(img, mask, np.ones(3))
+        box = np.degrees(np.arccos(np.clip(_camera(yaw, 12.0)[2] @ s, -1.0, 1.0))) < 8.0
+        cols = np.flatnonzero(box.any(0))
+        wall = np.zeros((H, W), bool)
+        wall[:, cols.min():cols.max() + 1] = True
+        wall &= yy >= np.flatnonzero(box.any(1)).min()
+        p = sfs.estimate_sun_from_sky(np.where(wall[..., None], 0.2, disp), mask & ~wall, K, R)
+        assert p.has_sun and _angle(p.sun_direction, s) < 5.0, (e, a, t, p.reason)
+
+
+def test_17_unseen_in_frame_rules_out_only_dim_open_sky_inside_the_frame() -> None:
+    """``unseen_in_frame`` on a level camera over a sky brightening towards the horizon (luminance 1-1.5) with one
+    bright spot (10) and a wall: a direction at the spot is seen; one on the dim open sky high up is ruled out; one
+    on the wall (not sky), one outside the frame, one behind the camera are not ruled out; a clipped pixel (inf)
+    counts as seen even off the mask."""
+    K, R, rays = _camera(0.0, 10.0)
+    sky = rays[..., 1] > 0
+    bright = 1.5 - 0.5 * rays[..., 1] / rays[..., 1].max()
+    bright[20, 120] = 10.0  # a sun's disc
+    wall = np.zeros((H, W), bool)
+    wall[:, :30] = True
+    sky &= ~wall
+    bright[15, 60] = np.inf  # a clipped disc the mask left out
+    sky[13:18, 58:63] = False
+
+    def at(ix: int, iy: int) -> np.ndarray:
+        return rays[iy, ix]
+
+    dirs = np.stack([at(120, 20), at(90, 40), at(10, 30), envmap.direction_from_angles(15.0, 90.0),
+                     envmap.direction_from_angles(20.0, 180.0), at(60, 15)])
+    got = sfs.unseen_in_frame(dirs, bright, sky, K, R)
+    assert got.tolist() == [False, True, False, False, False, False]

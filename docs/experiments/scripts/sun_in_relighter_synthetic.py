@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -95,7 +96,8 @@ def sun_direction(sh_rgb: np.ndarray) -> np.ndarray | None:
 
 def reading_kind(r) -> str:
     """``"sky"`` or the fallback's reason up to its first colon or parenthesis (its kind, without numbers)."""
-    return r.source if r.source == "sky" else r.reason.split(":")[0].split("(")[0].strip()
+    # the reason's words without its figures (parenthesised) and its detail (after a colon), to count by kind
+    return r.source if r.source == "sky" else re.sub(r"\s*\([^)]*\)", "", r.reason.split(":")[0]).strip()
 
 
 def compare(base: MethodRun, read: MethodRun, pairs: Sequence[Pair], idx: Sequence[int], samples: int,
