@@ -250,16 +250,23 @@ def per_pixel_stats(runs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def machine() -> dict[str, Any]:
-    """CPU model, cores, memory, Python/torch/Mitsuba versions: stated beside every figure."""
+    """CPU model and vector unit, cores, memory, Python/torch/Mitsuba versions: stated beside every figure.
+
+    ``vector_unit`` (``"avx512"``, ``"avx2"`` or None) is recorded because Mitsuba's LLVM backend compiles for it,
+    and renders from the same seed differ in their last bits between the two (docs/dataset.md)."""
     cpu = platform.processor() or platform.machine()
+    flags: set[str] = set()
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:
-                if line.startswith("model name"):
+                if line.startswith("model name") and cpu == (platform.processor() or platform.machine()):
                     cpu = line.split(":", 1)[1].strip()
+                elif line.startswith("flags"):
+                    flags = set(line.split(":", 1)[1].split())
                     break
     except OSError:
         pass
+    vector_unit = "avx512" if "avx512f" in flags else "avx2" if "avx2" in flags else None
     mem_gib = None
     try:
         with open("/proc/meminfo") as f:
@@ -270,8 +277,8 @@ def machine() -> dict[str, Any]:
     except OSError:
         pass
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    info: dict[str, Any] = {"cpu": cpu, "cores": cores, "memory_gib": mem_gib, "python": platform.python_version(),
-                            "os": platform.platform(terse=True)}
+    info: dict[str, Any] = {"cpu": cpu, "vector_unit": vector_unit, "cores": cores, "memory_gib": mem_gib,
+                            "python": platform.python_version(), "os": platform.platform(terse=True)}
     try:
         import torch
 
