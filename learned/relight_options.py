@@ -85,12 +85,12 @@ class RelightOptions:
             and sky read from the photo's sky through its camera (:func:`learned.sky_lighting.read_sky_lighting`: the
             posterior's MAP sky, sun and a ground, as order-2 SH at the decomposition's level; the quotient shades
             its sun by the exact cosine when the target's sun is too), falling back to the decomposition's where the
-            sky says nothing (no sky, night, overcast, blown out, a sun not seen where the fit puts it, a sun it does
-            not place). The default stays ``"decomposition"``, chosen on the training panoramas' crops (bench --real
-            --full's 118 training crops with sky: self-relighting ``quotient`` 22.83 dB today, 21.70 dB with
-            ``"sky"``; the sky reads 33 of them, and its misread suns, on dawn, night and hazy skies, cost more than
-            its right ones gain) and on bench --quick's synthetic pairs (``proposed`` l1 0.1194 today, 0.1297 with
-            ``"sky"``); docs/experiments/61-sun-in-relighter.md.
+            sky says nothing (no sky, night, overcast, blown out, a sky the model cannot draw, a sun not seen where
+            the fit puts it, a sun it does not place). The default stays ``"decomposition"``, chosen on the training
+            panoramas' crops (bench --real --full's 118 training crops with sky: self-relighting ``quotient`` 22.83
+            dB today, 21.84 dB with ``"sky"``; the sky reads 32 of them, and its misread suns, on dawn, night and
+            hazy skies, cost more than its right ones gain) and on bench --quick's synthetic pairs (``proposed`` l1
+            0.1194 today, 0.1297 with ``"sky"``); docs/experiments/61-sun-in-relighter.md, 64, 65.
 
     Raises:
         ValueError: an option out of its range, named.

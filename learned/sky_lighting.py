@@ -3,8 +3,9 @@
 :func:`read_sky_lighting` runs :func:`physrelight.sun_from_sky.estimate_sun_from_sky` on a photo's sky through its
 camera and decides whether the reading is informative: a sun, and its 90 % credible region at most
 :data:`MAX_INFORMATIVE_AREA_SR`. Then (``source == "sky"``) the MAP sky and sun, with a ground that reflects them
-(:func:`sky_sun_sh`), are the photo's lighting; otherwise (``"fallback"``: no sky, night, overcast, blown out, a sun
-not seen where the fit puts it, a sun the sky does not place) the caller keeps its own estimate, the decomposition's.
+(:func:`sky_sun_sh`), are the photo's lighting; otherwise (``"fallback"``: no sky, night, overcast, blown out, a sky
+the model cannot draw, a sun not seen where the fit puts it, a sun the sky does not place) the caller keeps its own
+estimate, the decomposition's.
 ``physrelight lighting`` (``lighting.json``), ``relight --layers`` and ``Relighter``
 (:attr:`learned.relight_options.RelightOptions.source_estimate`) all read the sky through this one function, so they
 agree.

@@ -55,7 +55,7 @@ from physrelight.panorama import camera_rays, level_camera, view_intrinsics
 from physrelight.sky_model import overcast_sky, sun_colour
 
 __all__ = ["AZIMUTH_STEP_DEG", "CLIP_LEVEL", "DARK_SKY_LEVEL", "EFFECTIVE_SAMPLES_PER_SR", "ELEVATIONS_DEG", "LOG_SIGMA",
-           "MAX_BLOCKS_PER_SIDE", "MAX_CLIPPED_SKY", "MAX_EXPONENT", "MAX_UNSEEN_SHARE", "MIN_EXPONENT",
+           "MAX_BLOCKS_PER_SIDE", "MAX_CLIPPED_SKY", "MAX_EXPONENT", "MAX_FIT_COST", "MAX_UNSEEN_SHARE", "MIN_EXPONENT",
            "MIN_SKY_PIXELS", "MIXES", "PREVIEW_SIZE", "SEEN_QUANTILE", "SEEN_RADIUS_DEG", "SKY_KINDS", "SkyBlocks",
            "SUNSKY_TURBIDITY_TABLE", "SunPosterior", "estimate_sun_from_sky", "hosek_wilkie_sky", "lighting_preview",
            "sky_blocks", "unseen_in_frame"]
@@ -99,10 +99,14 @@ MAX_UNSEEN_SHARE = 0.5
 """A sky whose fit puts more than this share of the sun's posterior in the frame where no sun is seen reads no sun
 (kind ``"unseen"``): the model explains the sky only with a sun the photo does not show (a twilight glow after
 sunset, a lit night sky, a haze the model does not hold)."""
-SKY_KINDS = ("clear", "hazy", "overcast", "night", "blown out", "unseen", "none")
+MAX_FIT_COST = 2.5
+"""A sky whose best hypothesis (sun or sunless) leaves a mean robust cost per block above this reads no sun (kind
+``"unfit"``): ``log(1 + (r / LOG_SIGMA)^2)`` averaged over the sky is 2.5 at typical log residuals of about 17 %,
+where real skies the model reads sit at 0.2-1.8 (study 65: training-side crops and the rooms)."""
+SKY_KINDS = ("clear", "hazy", "overcast", "night", "blown out", "unseen", "unfit", "none")
 """What :attr:`SunPosterior.sky_kind` says of a sky: a sun with the MAP overcast mix 0 or above 0; no sun because
 the sunless sky explains it best, it is too dark, too clipped, its fit puts the sun in the frame where none is seen,
-or there is too little of it."""
+no sky the model draws fits it, or there is too little of it."""
 PREVIEW_SIZE = (128, 256)
 """``(H, W)`` of :func:`lighting_preview`'s lat-long image."""
 _PART_CLIPPED = 1e300  # the seen check's brightness of a pixel clipped in some channels, not all (all: inf)
@@ -331,7 +335,8 @@ class SunPosterior:
         camera_yaw_deg: the camera's heading (world azimuth of its forward direction).
         sky_kind: what the sky is (:data:`SKY_KINDS`): ``"clear"`` (a sun, MAP mix 0), ``"hazy"`` (a sun, MAP mix
             above 0), ``"overcast"``, ``"night"``, ``"blown out"``, ``"unseen"`` (the fit's sun in the frame, where
-            the photo shows none: :data:`MAX_UNSEEN_SHARE`), ``"none"`` (too little sky to read).
+            the photo shows none: :data:`MAX_UNSEEN_SHARE`), ``"unfit"`` (no hypothesis fits the pixels:
+            :data:`MAX_FIT_COST`), ``"none"`` (too little sky to read).
         cues: the cues that spoke (:func:`physrelight.sun_estimate.estimate_sun`: ``"sky"``, ``"shadows"``,
             ``"shading"``); empty from :func:`estimate_sun_from_sky` alone.
 
@@ -593,10 +598,11 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     Returns:
         :class:`SunPosterior`. ``has_sun`` is False, with a reason, when fewer than :data:`MIN_SKY_PIXELS` sky
         pixels lie above the horizon, when a display photo's sky is darker than :data:`DARK_SKY_LEVEL` (night),
-        when more than :data:`MAX_CLIPPED_SKY` of it is clipped in every channel, when the sunless sky
-        explains the pixels best (then the posterior is flat or nearly so), or when more than
-        :data:`MAX_UNSEEN_SHARE` of the sun's posterior lies in the frame where the photo shows no sun
-        (:func:`unseen_in_frame`; kind ``"unseen"``). Below that share those cells are ruled out.
+        when more than :data:`MAX_CLIPPED_SKY` of it is clipped in every channel, when no hypothesis fits the
+        pixels (:data:`MAX_FIT_COST`; kind ``"unfit"``), when the sunless sky explains the pixels best (then the
+        posterior is flat or nearly so), or when more than :data:`MAX_UNSEEN_SHARE` of the sun's posterior lies in
+        the frame where the photo shows no sun (:func:`unseen_in_frame`; kind ``"unseen"``). Below that share those
+        cells are ruled out.
 
     Raises:
         ValueError: shapes, non-finite or negative values, a mask that is not boolean, a bad camera.
@@ -660,6 +666,12 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     with torch.no_grad():
         ll, a, g, ll_ovc = _fit(blocks, _table_at_elevations(el), el, az)  # (T, M, E, A)
     ll = ll.double().numpy()
+    # the best hypothesis's mean robust cost per unit of sky: a sky the model cannot draw is not read
+    fit_cost = -max(float(ll.max()), float(ll_ovc)) / (EFFECTIVE_SAMPLES_PER_SR * blocks.solid_angle)
+    if fit_cost > MAX_FIT_COST:
+        return _no_sun(f"the sky model does not fit these sky pixels (mean robust cost {fit_cost:.2f} > "
+                       f"{MAX_FIT_COST}: typical residuals over 20 %): not a sky it can draw (a wall, a ceiling, a "
+                       "lamp, broken cloud)", yaw, "unfit")
     n_mix = len(MIXES)
     # joint log posterior: the sun's cell prior, uniform turbidity and mix (the sunless m = 1 one of the mixes)
     log_mix_prior = -math.log(n_mix) - math.log(len(turbidities))

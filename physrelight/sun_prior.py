@@ -35,9 +35,9 @@ __all__ = ["KERNEL_DEG", "PRIOR_KINDS", "SUN_KINDS", "SUN_PRIOR", "SunPrior", "U
 SUN_PRIOR = Path(__file__).resolve().parent / "data" / "sun_prior.safetensors"
 """The shipped prior (``scripts/fit_sun_prior.py``; provenance in ``physrelight/data/README.md``)."""
 PRIOR_KINDS = ("clear", "hazy", "overcast", "night")
-"""The sky kinds the prior counts (:data:`physrelight.sun_from_sky.SKY_KINDS` less the three that describe a reading
-of a photo, not a sky: ``blown out``, ``unseen`` and ``none``). A twilight sky (the sun below the horizon) counts as
-``night``: no sun."""
+"""The sky kinds the prior counts (:data:`physrelight.sun_from_sky.SKY_KINDS` less the four that describe a reading
+of a photo, not a sky: ``blown out``, ``unseen``, ``unfit`` and ``none``). A twilight sky (the sun below the horizon)
+counts as ``night``: no sun."""
 SUN_KINDS = ("clear", "hazy")
 """The kinds with a sun."""
 KERNEL_DEG = 10.0

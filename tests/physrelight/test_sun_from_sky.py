@@ -343,3 +343,18 @@ def test_17_unseen_in_frame_rules_out_only_dim_open_sky_inside_the_frame() -> No
                      envmap.direction_from_angles(20.0, 180.0), at(60, 15)])
     got = sfs.unseen_in_frame(dirs, bright, sky, K, R)
     assert got.tolist() == [False, True, False, False, False, False]
+
+
+def test_18_pixels_no_sky_fits_are_not_read() -> None:
+    """A curtain where the sky should be (vertical folds: columns alternately 0.5x and 1.5x a Mitsuba sky's display
+    values, eight pixels wide): no hypothesis, sun or sunless, fits it within the model's residual scale, so no sun
+    is read (kind ``"unfit"``, the flat prior). The same sky as rendered is read (its fit cost is far below
+    :data:`MAX_FIT_COST`)."""
+    e, a, t, yaw = _in_view_cases()[0]
+    img, mask, K, R, s = _mitsuba_sky(e, a, t, yaw, 12.0)
+    disp = _display(img, mask, np.ones(3))
+    assert sfs.estimate_sun_from_sky(disp, mask, K, R).has_sun
+    folds = np.where((np.arange(W) // 8) % 2 == 0, 0.5, 1.5)[None, :, None]
+    p = sfs.estimate_sun_from_sky(np.clip(disp * folds, 0.0, 1.0), mask, K, R)
+    assert not p.has_sun and p.sky_kind == "unfit" and p.sun_direction is None, (p.sky_kind, p.reason)
+    assert "does not fit" in p.reason and p.credible_area_sr > 5.0
