@@ -42,6 +42,7 @@ import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import torch
@@ -273,16 +274,17 @@ def unseen_in_frame(directions: np.ndarray, brightness: np.ndarray, sky: np.ndar
     The image is max-pooled to at most :data:`_SEEN_POOL` blocks along its longer side first (a block is sky when
     half of it is).
     """
+    return _seen_check(brightness, sky, K, world_to_camera)(directions)
+
+
+def _seen_check(brightness: np.ndarray, sky: np.ndarray, K: np.ndarray,
+                world_to_camera: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """:func:`unseen_in_frame` for one photo as a function of the directions ``(N, 3)`` alone: the sky's threshold,
+    the pooled image and its rays are made once, for every set of directions asked about (the grid, then the MAP's
+    refinement)."""
     h, w = sky.shape
-    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-    out = np.zeros(len(d), dtype=bool)
-    if not sky.any() or len(d) == 0:
-        return out
-    uv, depth = project(torch.from_numpy((world_to_camera @ d.T)[None]), torch.from_numpy(K))
-    u, v, z = uv[0, 0].numpy(), uv[0, 1].numpy(), depth[0, 0].numpy()
-    inside = np.flatnonzero((z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h))
-    if len(inside) == 0:
-        return out
+    if not sky.any():
+        return lambda directions: np.zeros(len(np.asarray(directions).reshape(-1, 3)), dtype=bool)
     # clipped (inf) pixels as the largest float, so the quantile's interpolation stays finite
     threshold = float(np.quantile(np.minimum(brightness[sky], np.finfo(np.float64).max), SEEN_QUANTILE))
     b = max(1, math.ceil(max(h, w) / _SEEN_POOL))
@@ -298,13 +300,25 @@ def unseen_in_frame(directions: np.ndarray, brightness: np.ndarray, sky: np.ndar
     Kp[:2] /= b  # block centres: the pixel-centre convention scales with the block
     rays = camera_rays(Kp, world_to_camera, hp, wp).numpy()[:, :, 0].reshape(-1, 3)
     cos_r = math.cos(math.radians(SEEN_RADIUS_DEG))
-    for start in range(0, len(inside), 64):
-        idx = inside[start:start + 64]
-        near = (rays @ d[idx].T) > cos_r  # (P, n)
-        n_sky = (near & is_sky[:, None]).sum(0)
-        brightest = np.minimum(np.where(near, pooled[:, None], -np.inf).max(0), np.finfo(np.float64).max)
-        out[idx] = (n_sky > 0) & (n_sky >= 0.25 * near.sum(0)) & (brightest < threshold)
-    return out
+    K_t = torch.from_numpy(np.asarray(K, dtype=np.float64))
+
+    def unseen(directions: np.ndarray) -> np.ndarray:
+        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        out = np.zeros(len(d), dtype=bool)
+        if len(d) == 0:
+            return out
+        uv, depth = project(torch.from_numpy((world_to_camera @ d.T)[None]), K_t)
+        u, v, z = uv[0, 0].numpy(), uv[0, 1].numpy(), depth[0, 0].numpy()
+        inside = np.flatnonzero((z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h))
+        for start in range(0, len(inside), 64):
+            idx = inside[start:start + 64]
+            near = (rays @ d[idx].T) > cos_r  # (P, n)
+            n_sky = (near & is_sky[:, None]).sum(0)
+            brightest = np.minimum(np.where(near, pooled[:, None], -np.inf).max(0), np.finfo(np.float64).max)
+            out[idx] = (n_sky > 0) & (n_sky >= 0.25 * near.sum(0)) & (brightest < threshold)
+        return out
+
+    return unseen
 
 
 @dataclass(frozen=True)
@@ -691,8 +705,8 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
     # a sun in the frame on open sky would be seen there: the cells where it is not are ruled out
     # clipped pixels rank above every unclipped one, and those clipped in every channel above those clipped in some
     bright = np.where(clipped.all(-1), np.inf, np.where(clipped.any(-1), _PART_CLIPPED, lin @ np.array(LUMINANCE)))
-    unseen = unseen_in_frame(direction_from_angles(el[:, None], az[None, :]).reshape(-1, 3), bright, sky, Kc,
-                             R).reshape(len(el), len(az))
+    unseen_at = _seen_check(bright, sky, Kc, R)
+    unseen = unseen_at(direction_from_angles(el[:, None], az[None, :]).reshape(-1, 3)).reshape(len(el), len(az))
     if unseen.any():
         unseen_share = float(sun_mass[..., unseen].sum() / sun_mass.sum())
         if unseen_share > MAX_UNSEEN_SHARE:
@@ -721,8 +735,8 @@ def estimate_sun_from_sky(image: Array, sky_mask: Array, K: Array | None = None,
         fll, fit_a, fg, _ = _fit(blocks, _table_at_elevations(fe), fe, fa)
     fjoint = fll.double().numpy() + np.log(np.cos(np.radians(fe)))[None, None, :, None]
     if unseen.any():  # the MAP cell's centre is among the fine hypotheses and is not ruled out
-        fine_unseen = unseen_in_frame(direction_from_angles(fe[:, None], fa[None, :]).reshape(-1, 3), bright, sky,
-                                      Kc, R).reshape(len(fe), len(fa))
+        fine = direction_from_angles(fe[:, None], fa[None, :]).reshape(-1, 3)
+        fine_unseen = unseen_at(fine).reshape(len(fe), len(fa))
         fjoint = np.where(fine_unseen[None, None], -np.inf, fjoint)
     j_t, j_m, j_e, j_a = np.unravel_index(int(np.argmax(fjoint)), fjoint.shape)
     e_map, a_map = float(fe[j_e]), float(fa[j_a]) % 360.0

@@ -36,13 +36,14 @@ from validation.bench.real import _display, _panorama_sun, more_panoramas
 
 @contextmanager
 def rule_off():
-    """The reader as it was before the rule: no direction is ruled out."""
-    kept = sfs.unseen_in_frame
-    sfs.unseen_in_frame = lambda directions, *a, **k: np.zeros(len(np.asarray(directions).reshape(-1, 3)), bool)
+    """The reader as it was before the rule: no direction is ruled out (the check the reader builds per photo,
+    :func:`physrelight.sun_from_sky._seen_check`, replaced by one that rules nothing out)."""
+    kept = sfs._seen_check
+    sfs._seen_check = lambda *a, **k: (lambda directions: np.zeros(len(np.asarray(directions).reshape(-1, 3)), bool))
     try:
         yield
     finally:
-        sfs.unseen_in_frame = kept
+        sfs._seen_check = kept
 
 
 def summary(reading, R_est: np.ndarray, truth_rotation: np.ndarray | None, sun: np.ndarray | None) -> dict:
