@@ -254,18 +254,19 @@ def machine() -> dict[str, Any]:
 
     ``vector_unit`` (``"avx512"``, ``"avx2"`` or None) is recorded because Mitsuba's LLVM backend compiles for it,
     and renders from the same seed differ in their last bits between the two (docs/dataset.md)."""
-    cpu = platform.processor() or platform.machine()
+    model: str | None = None
     flags: set[str] = set()
     try:
         with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name") and cpu == (platform.processor() or platform.machine()):
-                    cpu = line.split(":", 1)[1].strip()
+            for line in f:  # the first processor's model name, then its flags
+                if model is None and line.startswith("model name"):
+                    model = line.split(":", 1)[1].strip()
                 elif line.startswith("flags"):
                     flags = set(line.split(":", 1)[1].split())
                     break
     except OSError:
         pass
+    cpu = model or platform.processor() or platform.machine()
     vector_unit = "avx512" if "avx512f" in flags else "avx2" if "avx2" in flags else None
     mem_gib = None
     try:
